@@ -1,0 +1,169 @@
+//! Rigid bodies, stored as a structure of arrays indexed by body number.
+//!
+//! Rotational state: for dynamic bodies the state variable is the world-frame angular momentum
+//! `L` about the centre of mass; the angular velocity is derived, `ω = I_w(q)⁻¹ L` with
+//! `I_w = R I_body Rᵀ`. Without torque `L` is then constant to round-off, which a torque-free
+//! tumbling body requires, whatever the orientation error of the exponential-map update.
+
+pub mod driver;
+
+pub use driver::{Driver, Profile, Term};
+
+use crate::math::{DMat3, DQuat, DVec3};
+use crate::shapes::{PolyhedronBuild, Shape};
+use std::sync::Arc;
+
+/// How a body moves.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BodyKind {
+    /// Moves under gravity and contact impulses.
+    Dynamic,
+    /// Velocity imposed by a [`Driver`]; unaffected by contacts.
+    Kinematic,
+    /// Never moves.
+    Fixed,
+}
+
+/// All bodies of a simulation.
+#[derive(Clone, Debug, Default)]
+pub struct BodySet {
+    pub kind: Vec<BodyKind>,
+    pub shape: Vec<Shape>,
+    /// Group number, used by the friction table and outputs.
+    pub group: Vec<u32>,
+    /// World position of the centre of mass (of the body origin for planes).
+    pub position: Vec<DVec3>,
+    /// Rotation body → world.
+    pub orientation: Vec<DQuat>,
+    pub velocity: Vec<DVec3>,
+    /// World-frame angular velocity.
+    pub angular_velocity: Vec<DVec3>,
+    /// World-frame angular momentum about the centre of mass (dynamic bodies).
+    pub angular_momentum: Vec<DVec3>,
+    /// 1/m, zero for kinematic and fixed bodies.
+    pub inv_mass: Vec<f64>,
+    /// Principal moments of inertia (kg m²) about the body axes.
+    pub inertia: Vec<DVec3>,
+    /// Imposed velocity of kinematic bodies.
+    pub driver: Vec<Option<Driver>>,
+}
+
+impl BodySet {
+    /// Number of bodies.
+    pub fn len(&self) -> usize {
+        self.kind.len()
+    }
+
+    /// True when there is no body.
+    pub fn is_empty(&self) -> bool {
+        self.kind.is_empty()
+    }
+
+    /// Adds a polyhedron of the given density (kg/m³), returns its index.
+    pub fn add_polyhedron(
+        &mut self,
+        build: PolyhedronBuild,
+        density: f64,
+        kind: BodyKind,
+        group: u32,
+    ) -> usize {
+        let mass = density * build.shape.volume;
+        let inertia = build.shape.unit_inertia * density;
+        let inv_mass = if kind == BodyKind::Dynamic {
+            1.0 / mass
+        } else {
+            0.0
+        };
+        self.push(
+            kind,
+            Shape::Polyhedron(Arc::new(build.shape)),
+            group,
+            build.position,
+            build.orientation,
+            inv_mass,
+            inertia,
+        )
+    }
+
+    /// Adds a fixed half-space whose boundary passes through `point` with outward normal
+    /// `normal` (the solid is on the side opposite to `normal`).
+    pub fn add_plane(&mut self, point: DVec3, normal: DVec3, group: u32) -> usize {
+        let n = normal.normalize();
+        // Body frame: origin at `point`, the plane normal is the body z axis.
+        let rot = DQuat::from_rotation_arc(DVec3::Z, n);
+        self.push(
+            BodyKind::Fixed,
+            Shape::Plane { normal: DVec3::Z },
+            group,
+            point,
+            rot,
+            0.0,
+            DVec3::ZERO,
+        )
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn push(
+        &mut self,
+        kind: BodyKind,
+        shape: Shape,
+        group: u32,
+        position: DVec3,
+        orientation: DQuat,
+        inv_mass: f64,
+        inertia: DVec3,
+    ) -> usize {
+        self.kind.push(kind);
+        self.shape.push(shape);
+        self.group.push(group);
+        self.position.push(position);
+        self.orientation.push(orientation.normalize());
+        self.velocity.push(DVec3::ZERO);
+        self.angular_velocity.push(DVec3::ZERO);
+        self.angular_momentum.push(DVec3::ZERO);
+        self.inv_mass.push(inv_mass);
+        self.inertia.push(inertia);
+        self.driver.push(None);
+        self.len() - 1
+    }
+
+    /// Sets the angular velocity of body `i` (and its angular momentum if dynamic).
+    pub fn set_angular_velocity(&mut self, i: usize, omega: DVec3) {
+        self.angular_velocity[i] = omega;
+        if self.kind[i] == BodyKind::Dynamic {
+            self.angular_momentum[i] = self.inertia_world(i) * omega;
+        }
+    }
+
+    /// Mass of body `i` (infinite for non-dynamic bodies).
+    pub fn mass(&self, i: usize) -> f64 {
+        1.0 / self.inv_mass[i]
+    }
+
+    /// World inertia tensor `R I Rᵀ` of body `i`.
+    pub fn inertia_world(&self, i: usize) -> DMat3 {
+        let r = DMat3::from_quat(self.orientation[i]);
+        r * DMat3::from_diagonal(self.inertia[i]) * r.transpose()
+    }
+
+    /// World inverse inertia tensor `R I⁻¹ Rᵀ`, zero for non-dynamic bodies.
+    pub fn inv_inertia_world(&self, i: usize) -> DMat3 {
+        if self.kind[i] != BodyKind::Dynamic {
+            return DMat3::ZERO;
+        }
+        let r = DMat3::from_quat(self.orientation[i]);
+        r * DMat3::from_diagonal(self.inertia[i].recip()) * r.transpose()
+    }
+
+    /// Kinetic energy of the dynamic bodies.
+    pub fn kinetic_energy(&self) -> f64 {
+        (0..self.len())
+            .filter(|&i| self.kind[i] == BodyKind::Dynamic)
+            .map(|i| {
+                0.5 * self.mass(i) * self.velocity[i].length_squared()
+                    + 0.5 * self.angular_velocity[i].dot(self.angular_momentum[i])
+            })
+            .sum()
+    }
+}

@@ -1,0 +1,222 @@
+//! Contact detection at the beginning of a step: world geometry of every body, broad phase on a
+//! uniform grid, narrow phase per candidate pair (in parallel, in a deterministic order).
+
+pub mod broad;
+pub mod narrow;
+
+pub use broad::{Aabb, BroadPhase};
+pub use narrow::{Manifold, ManifoldPoint, WorldPolyhedron};
+
+use crate::bodies::{BodyKind, BodySet};
+use crate::math::DVec3;
+use crate::shapes::Shape;
+use rayon::prelude::*;
+
+/// One detected contact point, before the contact frame and the law are attached.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RawContact {
+    pub body1: u32,
+    pub body2: u32,
+    /// World position.
+    pub point: DVec3,
+    /// Unit normal from body 1 toward body 2.
+    pub normal: DVec3,
+    /// Signed gap (negative = overlap).
+    pub gap: f64,
+}
+
+/// World-frame geometry of all polyhedra, refreshed each step.
+#[derive(Default, Debug)]
+struct GeometryCache {
+    vertices: Vec<DVec3>,
+    vertex_start: Vec<usize>,
+    normals: Vec<DVec3>,
+    offsets: Vec<f64>,
+    face_start: Vec<usize>,
+}
+
+/// Contact detection with reusable buffers.
+#[derive(Default, Debug)]
+pub struct Detector {
+    broad: BroadPhase,
+    cache: GeometryCache,
+    aabbs: Vec<Aabb>,
+    pairs: Vec<(u32, u32)>,
+}
+
+impl Detector {
+    /// World view of polyhedron `i` (valid after [`Detector::detect`] refreshed the cache).
+    fn world_poly<'a>(&'a self, bodies: &'a BodySet, i: usize) -> Option<WorldPolyhedron<'a>> {
+        match &bodies.shape[i] {
+            Shape::Polyhedron(p) => {
+                let c = &self.cache;
+                Some(WorldPolyhedron {
+                    shape: p,
+                    center: bodies.position[i],
+                    vertices: &c.vertices[c.vertex_start[i]..c.vertex_start[i + 1]],
+                    face_normals: &c.normals[c.face_start[i]..c.face_start[i + 1]],
+                    face_offsets: &c.offsets[c.face_start[i]..c.face_start[i + 1]],
+                })
+            }
+            Shape::Plane { .. } => None,
+        }
+    }
+
+    fn refresh_geometry(&mut self, bodies: &BodySet) {
+        let c = &mut self.cache;
+        c.vertex_start.clear();
+        c.face_start.clear();
+        let (mut nv, mut nf) = (0, 0);
+        for s in &bodies.shape {
+            c.vertex_start.push(nv);
+            c.face_start.push(nf);
+            if let Shape::Polyhedron(p) = s {
+                nv += p.vertices.len();
+                nf += p.face_normals.len();
+            }
+        }
+        c.vertex_start.push(nv);
+        c.face_start.push(nf);
+        c.vertices.resize(nv, DVec3::ZERO);
+        c.normals.resize(nf, DVec3::ZERO);
+        c.offsets.resize(nf, 0.0);
+        // Per-body transforms, in parallel over disjoint chunks of the flat arrays.
+        let mut vchunks: Vec<&mut [DVec3]> = Vec::with_capacity(bodies.len());
+        let mut rest = c.vertices.as_mut_slice();
+        for i in 0..bodies.len() {
+            let (a, b) = rest.split_at_mut(c.vertex_start[i + 1] - c.vertex_start[i]);
+            vchunks.push(a);
+            rest = b;
+        }
+        let mut nchunks: Vec<(&mut [DVec3], &mut [f64])> = Vec::with_capacity(bodies.len());
+        let (mut rn, mut ro) = (c.normals.as_mut_slice(), c.offsets.as_mut_slice());
+        for i in 0..bodies.len() {
+            let k = c.face_start[i + 1] - c.face_start[i];
+            let (a, b) = rn.split_at_mut(k);
+            let (x, y) = ro.split_at_mut(k);
+            nchunks.push((a, x));
+            rn = b;
+            ro = y;
+        }
+        vchunks
+            .into_par_iter()
+            .zip(nchunks.into_par_iter())
+            .enumerate()
+            .with_min_len(64)
+            .for_each(|(i, (v, (n, o)))| {
+                if let Shape::Polyhedron(p) = &bodies.shape[i] {
+                    let (x, q) = (bodies.position[i], bodies.orientation[i]);
+                    for (w, b) in v.iter_mut().zip(&p.vertices) {
+                        *w = x + q * *b;
+                    }
+                    for f in 0..p.face_normals.len() {
+                        n[f] = q * p.face_normals[f];
+                        o[f] = p.face_offsets[f] + n[f].dot(x);
+                    }
+                }
+            });
+    }
+
+    /// Detects all contact points within `alert` of touching, appended to `out` (cleared first)
+    /// sorted by pair `(body1, body2)`. Pairs of two non-dynamic bodies are skipped.
+    pub fn detect(&mut self, bodies: &BodySet, alert: f64, out: &mut Vec<RawContact>) {
+        out.clear();
+        self.refresh_geometry(bodies);
+        let n = bodies.len();
+        let half = DVec3::splat(0.5 * alert);
+        self.aabbs.clear();
+        let mut polys = Vec::with_capacity(n);
+        let mut planes = Vec::new();
+        for i in 0..n {
+            match &bodies.shape[i] {
+                Shape::Polyhedron(_) => {
+                    let c = &self.cache;
+                    let v = &c.vertices[c.vertex_start[i]..c.vertex_start[i + 1]];
+                    let (lo, hi) = v.iter().fold(
+                        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+                    );
+                    self.aabbs.push(Aabb {
+                        min: lo - half,
+                        max: hi + half,
+                    });
+                    polys.push(i as u32);
+                }
+                Shape::Plane { .. } => {
+                    self.aabbs.push(Aabb {
+                        min: DVec3::ZERO,
+                        max: DVec3::ZERO,
+                    });
+                    planes.push(i as u32);
+                }
+            }
+        }
+        let dynamic = |i: u32| bodies.kind[i as usize] == BodyKind::Dynamic;
+        let mut pairs = std::mem::take(&mut self.pairs);
+        self.broad.find_pairs(
+            &self.aabbs,
+            &polys,
+            |i, j| !dynamic(i) && !dynamic(j),
+            &mut pairs,
+        );
+        // Half-spaces against every dynamic polyhedron whose box reaches within `alert`.
+        for &p in &planes {
+            let (nrm, off) = plane_world(bodies, p as usize);
+            for &i in &polys {
+                if !dynamic(i) {
+                    continue;
+                }
+                let b = &self.aabbs[i as usize];
+                // Lowest corner of the box along the normal.
+                let lowest = DVec3::select(nrm.cmpge(DVec3::ZERO), b.min, b.max);
+                if nrm.dot(lowest) - off <= alert {
+                    pairs.push((p.min(i), p.max(i)));
+                }
+            }
+        }
+        pairs.sort_unstable();
+        let this = &*self;
+        let manifolds: Vec<(u32, u32, Option<Manifold>)> = pairs
+            .par_iter()
+            .with_min_len(32)
+            .map(|&(i, j)| {
+                let (iu, ju) = (i as usize, j as usize);
+                match (this.world_poly(bodies, iu), this.world_poly(bodies, ju)) {
+                    (Some(a), Some(b)) => (i, j, narrow::polyhedron_polyhedron(&a, &b, alert)),
+                    (None, Some(b)) => {
+                        let (nrm, off) = plane_world(bodies, iu);
+                        (i, j, narrow::plane_polyhedron(nrm, off, &b, alert))
+                    }
+                    (Some(a), None) => {
+                        let (nrm, off) = plane_world(bodies, ju);
+                        (j, i, narrow::plane_polyhedron(nrm, off, &a, alert))
+                    }
+                    (None, None) => (i, j, None),
+                }
+            })
+            .collect();
+        for (b1, b2, m) in manifolds {
+            if let Some(m) = m {
+                for p in &m.points {
+                    out.push(RawContact {
+                        body1: b1,
+                        body2: b2,
+                        point: p.point,
+                        normal: m.normal,
+                        gap: p.gap,
+                    });
+                }
+            }
+        }
+        self.pairs = pairs;
+    }
+}
+
+/// World normal and offset (`n·x = offset` on the boundary) of half-space body `i`.
+fn plane_world(bodies: &BodySet, i: usize) -> (DVec3, f64) {
+    let Shape::Plane { normal } = &bodies.shape[i] else {
+        unreachable!("plane_world called on a polyhedron")
+    };
+    let n = bodies.orientation[i] * *normal;
+    (n, n.dot(bodies.position[i]))
+}

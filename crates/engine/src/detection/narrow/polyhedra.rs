@@ -1,0 +1,558 @@
+//! Convex polyhedron against convex polyhedron: Separating Axis Test and face clipping.
+//!
+//! Method (after Gregorius, "The Separating Axis Test between convex polyhedra", GDC 2013):
+//!
+//! 1. Face normals of A, then of B: the separation along a face normal is the smallest signed
+//!    distance of the other body's vertices to the face plane. Any separation above the alert
+//!    distance ends the test (no contact).
+//! 2. Edge pairs whose Gauss-map arcs cross (the pair spans a face of the Minkowski difference)
+//!    give the axis `eA × eB`, oriented out of A. The separation is first bounded from above by
+//!    the distance between the edge lines, and only a pair that could win is evaluated exactly
+//!    with the support functions of both bodies, so a round-off misjudged Gauss-map test can never
+//!    report a separation that does not exist. A first pass skips A's edges lying far beyond a
+//!    face plane of B; the manifold it yields proves whether the bodies are close enough for that
+//!    to be exact, and otherwise every edge pair is tested again (see [`edge_axis`]).
+//! 3. The axis of largest separation wins, faces before edges and A's faces before B's within a
+//!    small tolerance, which keeps face–face manifolds stable (a face is skipped if its clipped
+//!    points do not reach the axis depth, see [`choose`]). A face axis gives a reference face
+//!    and an incident face on the other body; the incident polygon is clipped by the side planes
+//!    of the reference face (Sutherland–Hodgman) and every clipped point within the alert distance
+//!    becomes a contact point. An edge axis gives one point between the closest points of the two
+//!    edges.
+//!
+//! Touching or overlapping, the largest separation over these axes is minus the penetration
+//! depth (the largest over all directions). Apart, another direction (say, for two vertices
+//! facing each other) may separate the bodies a little more, so a pair slightly farther apart
+//! than the alert distance can still get a manifold, always with positive gaps.
+//!
+//! Why not parry's manifolds: `parry3d` contact manifolds would need filtering before use in
+//! NSCD (points beyond the prediction distance, duplicate points, an extra GJK point), and a
+//! failure of its EPA is reported silently as "no contact", which lets grains fall through large
+//! fixed boxes; its EPA depths can also be off by percents (see `tests/narrow_phase.rs`). The
+//! test here has no iteration that can fail to converge.
+//!
+//! Deterministic (fixed loop orders, ties to the lowest index) and allocation-light: scratch data
+//! lives in fixed-size stack arrays, with a heap fallback only for unusually large polyhedra; the
+//! returned manifold is the only allocation.
+
+use super::{reduce_to_four, Manifold, ManifoldPoint, WorldPolyhedron};
+use crate::math::DVec3;
+
+/// Preference tolerance between axes, relative to the smaller circumradius: an axis must beat a
+/// preferred one (faces over edges, A's faces over B's) by more than this to be chosen. Relative
+/// to the *smaller* body so that a grain on a 20 m box keeps a tolerance at the grain's scale.
+const PREFER_RELATIVE: f64 = 1e-5;
+/// Edge pairs whose directions make an angle with squared sine below this are parallel: their
+/// cross product has no reliable direction, and the face axes already cover them.
+const PARALLEL_SIN2: f64 = 1e-20;
+/// Edges of B whose Gauss-map arcs live on the stack (a 20-vertex grain has at most 54 edges).
+const STACK_EDGES: usize = 64;
+/// Vertices whose proximity masks live on the stack.
+const STACK_VERTICES: usize = 64;
+/// Capacity of the stack buffers of the clipped polygon.
+const STACK_POLYGON: usize = 48;
+
+/// Contact manifold between polyhedra `a` (body 1) and `b` (body 2), or `None` when a face
+/// normal or an edge–edge axis separates them by more than `alert`.
+///
+/// The normal points from `a` toward `b`; each point lies midway between the two surfaces and
+/// carries its gap (negative when overlapping), at most `alert`. At most four points, reduced by
+/// [`reduce_to_four`]. Face contacts give up to four points, edge–edge contacts one.
+///
+/// Touching or overlapping, the deepest gap is minus the exact penetration depth (up to the
+/// axis preference tolerance, `1e-5` of the smaller circumradius). Apart within `alert`, gaps
+/// are at least the separation along the chosen axis, which is positive up to that tolerance.
+///
+/// # Panics
+///
+/// Only in debug builds, when the world arrays of `a` or `b` do not match their shape's
+/// topology (a caller bug); release builds then return `None`.
+pub fn polyhedron_polyhedron(
+    a: &WorldPolyhedron,
+    b: &WorldPolyhedron,
+    alert: f64,
+) -> Option<Manifold> {
+    if !is_consistent(a) || !is_consistent(b) {
+        debug_assert!(
+            false,
+            "WorldPolyhedron arrays inconsistent with their shape"
+        );
+        return None;
+    }
+
+    let tol = PREFER_RELATIVE * a.shape.radius.min(b.shape.radius);
+    let face_a = face_axis(a, b, alert, None)?;
+    // While testing B's faces, flag A's vertices lying far beyond them, to skip A's edges far
+    // from B (see `edge_axis`). `near` bounds `max(−floor, alert)` from above whatever B's best
+    // face turns out to be, since `floor ≥ face_a.sep`.
+    let near = (-face_a.sep).max(alert) + tol;
+    let (mut stack_far, mut heap_far) = ([0u64; STACK_VERTICES], Vec::new());
+    let far_a = scratch(&mut stack_far, &mut heap_far, a.vertices.len(), 0);
+    let face_b = face_axis(b, a, alert, Some((far_a, near)))?;
+    let floor = face_a.sep.max(face_b.sep);
+
+    // First pass: only A's edges near B, valid when the manifold proves that the bodies are
+    // within `near` of each other. Otherwise, all edge pairs.
+    let edge = edge_axis(a, b, alert, floor, Some(far_a))?;
+    let (mut manifold, witness) = choose(a, b, &face_a, &face_b, edge, alert, tol);
+    if witness > near || witness.is_nan() {
+        let edge = edge_axis(a, b, alert, floor, None)?;
+        manifold = choose(a, b, &face_a, &face_b, edge, alert, tol).0;
+    }
+    reduce_to_four(&mut manifold.points, manifold.normal);
+    Some(manifold)
+}
+
+/// The manifold of the axis of largest separation, with its witness distance (see
+/// [`face_manifold`], [`edge_manifold`]).
+///
+/// Among the axes within `tol` of the largest separation, A's face comes first, then B's face,
+/// then the edge pair. A face is taken only if its clipped points reach the depth of the axis
+/// (within `tol`): a face axis merely tied with the true contact feature may clip to nothing
+/// representative, e.g. when two edges touch beside a face.
+fn choose(
+    a: &WorldPolyhedron,
+    b: &WorldPolyhedron,
+    face_a: &FaceAxis,
+    face_b: &FaceAxis,
+    edge: Option<EdgeAxis>,
+    alert: f64,
+    tol: f64,
+) -> (Manifold, f64) {
+    let best = face_a
+        .sep
+        .max(face_b.sep)
+        .max(edge.as_ref().map_or(f64::NEG_INFINITY, |e| e.sep));
+    let mut first = None;
+    for (axis, r, o, flip) in [(face_a, a, b, false), (face_b, b, a, true)] {
+        if axis.sep >= best - tol {
+            let (manifold, witness) = face_manifold(r, o, axis, alert, flip);
+            let deepest = manifold
+                .points
+                .iter()
+                .fold(f64::INFINITY, |m, p| m.min(p.gap));
+            if witness.is_finite() && deepest <= best + tol {
+                return (manifold, witness);
+            }
+            first.get_or_insert((manifold, witness));
+        }
+    }
+    match (edge, first) {
+        (Some(e), _) if e.sep >= best - tol => edge_manifold(a, b, &e),
+        (_, Some(first)) => first,
+        // Unreachable: the best axis is a face or the edge pair.
+        _ => face_manifold(a, b, face_a, alert, false),
+    }
+}
+
+/// Whether the world arrays match the topology they will be indexed with.
+fn is_consistent(p: &WorldPolyhedron) -> bool {
+    let s = p.shape;
+    let faces = s.face_normals.len();
+    !p.vertices.is_empty()
+        && faces > 0
+        && p.vertices.len() == s.vertices.len()
+        && p.face_normals.len() == faces
+        && p.face_offsets.len() == faces
+        && s.face_start.len() == faces + 1
+        && s.edge_faces.len() == s.edges.len()
+}
+
+/// Best face axis of a reference body.
+struct FaceAxis {
+    /// Separation along the face normal.
+    sep: f64,
+    /// Face of the reference body.
+    face: usize,
+    /// Deepest vertex of the other body below that face.
+    support: usize,
+}
+
+/// The face of `r` of largest separation from `o`, or `None` if one exceeds `alert`.
+///
+/// With `far = Some((masks, thr))`, also sets bit `f` of `masks[v]` for each of the first 64
+/// faces `f` of `r` that vertex `v` of `o` lies beyond by more than `thr`.
+fn face_axis(
+    r: &WorldPolyhedron,
+    o: &WorldPolyhedron,
+    alert: f64,
+    mut far: Option<(&mut [u64], f64)>,
+) -> Option<FaceAxis> {
+    let mut best = FaceAxis {
+        sep: f64::NEG_INFINITY,
+        face: 0,
+        support: 0,
+    };
+    for (f, (&n, &d)) in r.face_normals.iter().zip(r.face_offsets).enumerate() {
+        let (support, min) = match far.as_mut() {
+            Some((masks, thr)) if f < 64 => {
+                let mut arg = 0;
+                let mut min = f64::INFINITY;
+                for (i, (&v, mask)) in o.vertices.iter().zip(masks.iter_mut()).enumerate() {
+                    let s = n.dot(v);
+                    if s < min {
+                        min = s;
+                        arg = i;
+                    }
+                    *mask |= u64::from(s - d > *thr) << f;
+                }
+                (arg, min)
+            }
+            _ => min_vertex(o.vertices, n),
+        };
+        let sep = min - d;
+        // NaN coordinates count as separated.
+        if sep > alert || sep.is_nan() {
+            return None;
+        }
+        if sep > best.sep {
+            best = FaceAxis {
+                sep,
+                face: f,
+                support,
+            };
+        }
+    }
+    Some(best)
+}
+
+/// Index and value of the smallest `n·v` (first one on ties).
+#[inline]
+fn min_vertex(vertices: &[DVec3], n: DVec3) -> (usize, f64) {
+    let mut arg = 0;
+    let mut min = f64::INFINITY;
+    for (i, &v) in vertices.iter().enumerate() {
+        let s = n.dot(v);
+        if s < min {
+            min = s;
+            arg = i;
+        }
+    }
+    (arg, min)
+}
+
+/// Support separation along unit `n`: `min over B of n·v − max over A of n·v`.
+#[inline]
+fn support_separation(a: &[DVec3], b: &[DVec3], n: DVec3) -> f64 {
+    let max_a = a.iter().fold(f64::NEG_INFINITY, |m, &v| m.max(n.dot(v)));
+    let min_b = b.iter().fold(f64::INFINITY, |m, &v| m.min(n.dot(v)));
+    min_b - max_a
+}
+
+/// Best edge–edge axis.
+struct EdgeAxis {
+    /// Separation along `normal`.
+    sep: f64,
+    /// Unit axis, pointing out of A.
+    normal: DVec3,
+    /// Edge of A.
+    edge_a: usize,
+    /// Edge of B.
+    edge_b: usize,
+}
+
+/// The edge–edge axis of largest separation above `floor` (the best face separation) among
+/// the edge pairs spanning a face of the Minkowski difference; `None` if one exceeds `alert`,
+/// `Some(None)` if none beats `floor`.
+///
+/// With `far_a`, an edge of A whose two ends are flagged beyond the same face plane of B (by more
+/// than some `thr ≥ max(−floor, alert)`, see [`face_axis`]) is skipped. This loses nothing when
+/// the bodies are within `thr` of each other: overlapping, the best edge axis `n` (separation
+/// `s ∈ [floor, 0]`) has witness points `qa` on A's edge and `qa + s·n` on B's edge, so A's
+/// edge has a point within `|s| ≤ thr` of every face plane of B; apart by at most `thr`, the
+/// Minkowski faces through the closest point have witnesses within `thr` likewise. The caller
+/// checks that proximity on the resulting manifold and falls back to all pairs otherwise.
+///
+/// The Gauss-map test runs branch-free over B's edges (structure of arrays, vectorisable); only
+/// the few crossing pairs are examined further.
+fn edge_axis(
+    a: &WorldPolyhedron,
+    b: &WorldPolyhedron,
+    alert: f64,
+    floor: f64,
+    far_a: Option<&[u64]>,
+) -> Option<Option<EdgeAxis>> {
+    // Negated Gauss-map arcs (c, d) of B's edges, for the Minkowski difference A − B, and d × c.
+    let n_b = b.shape.edges.len();
+    let mut stack = [[0.0; STACK_EDGES]; 9];
+    let mut heap: [Vec<f64>; 9] = Default::default();
+    let [cx, cy, cz, dx, dy, dz, ux, uy, uz] = if n_b <= STACK_EDGES {
+        stack.each_mut().map(|s| &mut s[..n_b])
+    } else {
+        heap.each_mut().map(|h| {
+            h.resize(n_b, 0.0);
+            &mut h[..]
+        })
+    };
+    for (j, faces) in b.shape.edge_faces.iter().enumerate() {
+        let c = -b.face_normals[faces[0] as usize];
+        let d = -b.face_normals[faces[1] as usize];
+        let u = d.cross(c);
+        (cx[j], cy[j], cz[j]) = (c.x, c.y, c.z);
+        (dx[j], dy[j], dz[j]) = (d.x, d.y, d.z);
+        (ux[j], uy[j], uz[j]) = (u.x, u.y, u.z);
+    }
+    let mut stack_hits = [false; STACK_EDGES];
+    let mut heap_hits = Vec::new();
+    let hits = scratch(&mut stack_hits, &mut heap_hits, n_b, false);
+
+    let mut best: Option<EdgeAxis> = None;
+    let mut best_sep = floor;
+    for (ia, (&edge, faces)) in a.shape.edges.iter().zip(&a.shape.edge_faces).enumerate() {
+        if far_a.is_some_and(|m| m[edge[0] as usize] & m[edge[1] as usize] != 0) {
+            continue;
+        }
+        let na = a.face_normals[faces[0] as usize];
+        let nb = a.face_normals[faces[1] as usize];
+        let w = nb.cross(na);
+        // Do arcs (na, nb) and (c, d) cross on the unit sphere? The last product rejects
+        // antipodal arcs (Gregorius' hemisphere test).
+        for j in 0..n_b {
+            let cba = w.x * cx[j] + w.y * cy[j] + w.z * cz[j];
+            let dba = w.x * dx[j] + w.y * dy[j] + w.z * dz[j];
+            let adc = na.x * ux[j] + na.y * uy[j] + na.z * uz[j];
+            let bdc = nb.x * ux[j] + nb.y * uy[j] + nb.z * uz[j];
+            hits[j] = (cba * dba < 0.0) & (adc * bdc < 0.0) & (cba * bdc > 0.0);
+        }
+        let pa = a.vertices[edge[0] as usize];
+        let ea = a.vertices[edge[1] as usize] - pa;
+        for (ib, _) in hits.iter().enumerate().filter(|(_, &hit)| hit) {
+            let eb_idx = b.shape.edges[ib];
+            let pb = b.vertices[eb_idx[0] as usize];
+            let eb = b.vertices[eb_idx[1] as usize] - pb;
+            let axis = ea.cross(eb);
+            let len2 = axis.length_squared();
+            if len2 <= PARALLEL_SIN2 * ea.length_squared() * eb.length_squared() || len2.is_nan() {
+                continue;
+            }
+            let mut n = axis / len2.sqrt();
+            if n.dot(pa - a.center) < 0.0 {
+                n = -n;
+            }
+            // Distance between the edge lines: an upper bound of the support separation along
+            // `n`, equal to it when the pair really spans a Minkowski face.
+            if n.dot(pb - pa) <= best_sep {
+                continue;
+            }
+            let sep = support_separation(a.vertices, b.vertices, n);
+            if sep > alert || sep.is_nan() {
+                return None;
+            }
+            if sep > best_sep {
+                best_sep = sep;
+                best = Some(EdgeAxis {
+                    sep,
+                    normal: n,
+                    edge_a: ia,
+                    edge_b: ib,
+                });
+            }
+        }
+    }
+    Some(best)
+}
+
+/// A scratch slice of `n` copies of `zero`: the stack array when it is large enough, else the
+/// heap vector.
+fn scratch<'s, T: Copy, const N: usize>(
+    stack: &'s mut [T; N],
+    heap: &'s mut Vec<T>,
+    n: usize,
+    zero: T,
+) -> &'s mut [T] {
+    if n <= N {
+        &mut stack[..n]
+    } else {
+        heap.clear();
+        heap.resize(n, zero);
+        heap
+    }
+}
+
+/// Face contact: reference face `axis.face` of `r`, incident face on `o`; also returns the
+/// witness distance, the smallest `|gap|` of the points (each point joins a point of `o`'s
+/// incident face to its projection inside the reference face, so the bodies are at most that
+/// far apart), or infinity for the fallback point.
+///
+/// The incident face is the face of `o` most anti-parallel to the reference normal among those
+/// holding the deepest vertex: that vertex then always survives clipping when the face is the
+/// axis of least penetration, so the deepest gap is the separation.
+fn face_manifold(
+    r: &WorldPolyhedron,
+    o: &WorldPolyhedron,
+    axis: &FaceAxis,
+    alert: f64,
+    flip: bool,
+) -> (Manifold, f64) {
+    let n = r.face_normals[axis.face];
+    let offset = r.face_offsets[axis.face];
+    let normal = if flip { -n } else { n };
+
+    let ref_loop = face_loop(r, axis.face);
+    let inc_loop = face_loop(o, incident_face(o, n, axis.support as u32));
+
+    let cap = inc_loop.len() + ref_loop.len();
+    let mut stack = [[DVec3::ZERO; STACK_POLYGON]; 2];
+    let mut heap = [Vec::new(), Vec::new()];
+    let [buf0, buf1] = if cap <= STACK_POLYGON {
+        let [s0, s1] = &mut stack;
+        [&mut s0[..], &mut s1[..]]
+    } else {
+        let [h0, h1] = &mut heap;
+        h0.resize(cap, DVec3::ZERO);
+        h1.resize(cap, DVec3::ZERO);
+        [&mut h0[..], &mut h1[..]]
+    };
+    for (dst, &v) in buf0.iter_mut().zip(inc_loop) {
+        *dst = o.vertices[v as usize];
+    }
+    let mut len = inc_loop.len();
+    let (mut src, mut dst) = (buf0, buf1);
+    for (i, &v) in ref_loop.iter().enumerate() {
+        let p = r.vertices[v as usize];
+        let q = r.vertices[ref_loop[(i + 1) % ref_loop.len()] as usize];
+        // Outward normal of the side plane through edge (p, q) of the CCW reference loop.
+        let side = (q - p).cross(n);
+        len = clip(&src[..len], dst, side, side.dot(p));
+        std::mem::swap(&mut src, &mut dst);
+        if len == 0 {
+            break;
+        }
+    }
+
+    let mut points = Vec::with_capacity(len.max(1));
+    let mut witness = f64::INFINITY;
+    for &x in &src[..len] {
+        let gap = n.dot(x) - offset;
+        if gap <= alert {
+            points.push(ManifoldPoint {
+                point: x - 0.5 * gap * n,
+                gap,
+            });
+            witness = witness.min(gap.abs());
+        }
+    }
+    if points.is_empty() {
+        // Apart, with the deepest vertex outside the reference face's prism (e.g. boxes corner
+        // to corner): keep one point at the deepest vertex with the axis separation as gap.
+        let v = o.vertices[axis.support];
+        points.push(ManifoldPoint {
+            point: v - 0.5 * axis.sep * n,
+            gap: axis.sep,
+        });
+    }
+    (Manifold { normal, points }, witness)
+}
+
+/// Vertex loop of face `f`.
+#[inline]
+fn face_loop<'s>(p: &WorldPolyhedron<'s>, f: usize) -> &'s [u32] {
+    let s = p.shape;
+    &s.face_vertices[s.face_start[f] as usize..s.face_start[f + 1] as usize]
+}
+
+/// Face of `o` holding vertex `v` with the normal most anti-parallel to `n` (first on ties);
+/// over all faces if no face holds `v`.
+fn incident_face(o: &WorldPolyhedron, n: DVec3, v: u32) -> usize {
+    let mut best = None;
+    let mut best_dot = f64::INFINITY;
+    for (f, &m) in o.face_normals.iter().enumerate() {
+        let dot = m.dot(n);
+        if dot < best_dot && face_loop(o, f).contains(&v) {
+            best_dot = dot;
+            best = Some(f);
+        }
+    }
+    best.unwrap_or_else(|| {
+        let mut best = 0;
+        let mut best_dot = f64::INFINITY;
+        for (f, &m) in o.face_normals.iter().enumerate() {
+            let dot = m.dot(n);
+            if dot < best_dot {
+                best_dot = dot;
+                best = f;
+            }
+        }
+        best
+    })
+}
+
+/// Sutherland–Hodgman: clips convex polygon `input` to `{x : side·x ≤ offset}` into `out`
+/// (capacity at least `input.len() + 1`) and returns the output length.
+fn clip(input: &[DVec3], out: &mut [DVec3], side: DVec3, offset: f64) -> usize {
+    let mut len = 0;
+    let count = input.len();
+    for i in 0..count {
+        let cur = input[i];
+        let next = input[(i + 1) % count];
+        let dc = side.dot(cur) - offset;
+        let dn = side.dot(next) - offset;
+        if dc <= 0.0 && len < out.len() {
+            out[len] = cur;
+            len += 1;
+        }
+        // Strict crossings only: a vertex on the plane is kept once, not twice. The capacity
+        // check only matters for a polygon made non-convex by round-off.
+        if ((dc < 0.0 && dn > 0.0) || (dc > 0.0 && dn < 0.0)) && len < out.len() {
+            out[len] = cur + (dc / (dc - dn)) * (next - cur);
+            len += 1;
+        }
+    }
+    len
+}
+
+/// Edge–edge contact: one point midway between the closest points of the two edges, and their
+/// distance as witness distance.
+fn edge_manifold(a: &WorldPolyhedron, b: &WorldPolyhedron, axis: &EdgeAxis) -> (Manifold, f64) {
+    let ea = a.shape.edges[axis.edge_a];
+    let eb = b.shape.edges[axis.edge_b];
+    let pa = a.vertices[ea[0] as usize];
+    let pb = b.vertices[eb[0] as usize];
+    let (qa, qb) = closest_on_segments(
+        pa,
+        a.vertices[ea[1] as usize] - pa,
+        pb,
+        b.vertices[eb[1] as usize] - pb,
+    );
+    let points = vec![ManifoldPoint {
+        point: 0.5 * (qa + qb),
+        gap: axis.sep,
+    }];
+    (
+        Manifold {
+            normal: axis.normal,
+            points,
+        },
+        (qb - qa).length(),
+    )
+}
+
+/// Closest points of segments `p1 + s·d1` and `p2 + t·d2`, `s, t ∈ [0, 1]` (Ericson, Real-Time
+/// Collision Detection, 5.1.9).
+fn closest_on_segments(p1: DVec3, d1: DVec3, p2: DVec3, d2: DVec3) -> (DVec3, DVec3) {
+    let r = p1 - p2;
+    let a = d1.length_squared();
+    let e = d2.length_squared();
+    let f = d2.dot(r);
+    if a <= f64::MIN_POSITIVE || e <= f64::MIN_POSITIVE {
+        // Degenerate edge: never produced by a valid hull; answer something finite.
+        return (p1, p2);
+    }
+    let b = d1.dot(d2);
+    let c = d1.dot(r);
+    let denom = a * e - b * b;
+    let mut s = if denom > 0.0 {
+        ((b * f - c * e) / denom).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let mut t = (b * s + f) / e;
+    if t < 0.0 {
+        t = 0.0;
+        s = (-c / a).clamp(0.0, 1.0);
+    } else if t > 1.0 {
+        t = 1.0;
+        s = ((b - c) / a).clamp(0.0, 1.0);
+    }
+    (p1 + d1 * s, p2 + d2 * t)
+}

@@ -1,0 +1,31 @@
+//! # ballast-engine
+//!
+//! A Non-Smooth Contact Dynamics (NSCD) engine for rigid convex polyhedra, after Moreau and Jean.
+//! Data flows one way through a time step, and the modules follow that flow:
+//!
+//! 1. [`bodies`]: rigid bodies (structure of arrays), mass properties, kinematic drivers;
+//! 2. [`shapes`]: convex polyhedra and half-spaces, their hull and mass properties;
+//! 3. [`detection`]: broad phase (uniform grid) and narrow phase (contact manifolds ≤ 4 points);
+//! 4. [`contacts`]: contact points with local frames `(n, t, s)`, persistence for warm start;
+//! 5. [`laws`]: the Signorini-Coulomb law, friction table and the exact local 3×3 solver;
+//! 6. [`solver`]: Delassus blocks and Non-Linear Gauss-Seidel (NLGS);
+//! 7. [`world`]: the θ-method time step tying it all together, with per-phase timers;
+//! 8. [`scenario`]: TOML scenario files, validated field by field.
+//!
+//! Conventions: SI units; a contact joins body 1 and body 2, its normal `n` points from body 1
+//! toward body 2; the gap `g` is positive when the surfaces are apart; the relative velocity is
+//! `u = v₂(x) − v₁(x)` so `uₙ > 0` separates; the contact impulse `r` acts `+r` on body 2 and `−r`
+//! on body 1.
+
+pub mod bodies;
+pub mod contacts;
+pub mod detection;
+pub mod digest;
+pub mod laws;
+pub mod math;
+pub mod output;
+pub mod scenario;
+pub mod shapes;
+pub mod solver;
+pub mod timing;
+pub mod world;

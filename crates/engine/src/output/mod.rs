@@ -1,0 +1,142 @@
+//! Run outputs: accumulated statistics, `summary.json` and `series.csv`.
+
+use crate::digest::state_digest;
+use crate::timing::PhaseTimes;
+use crate::world::{StepReport, World};
+use serde::Serialize;
+use std::io::Write;
+use std::path::Path;
+
+/// Statistics accumulated over the steps of a run.
+#[derive(Clone, Debug, Default)]
+pub struct RunStats {
+    pub steps: u64,
+    pub contacts_sum: u64,
+    pub contacts_max: usize,
+    pub iterations_sum: u64,
+    pub max_residual: f64,
+    pub not_converged: u64,
+    pub max_penetration: f64,
+}
+
+impl RunStats {
+    /// Adds one step.
+    pub fn add(&mut self, r: &StepReport) {
+        self.steps += 1;
+        self.contacts_sum += r.contacts as u64;
+        self.contacts_max = self.contacts_max.max(r.contacts);
+        self.iterations_sum += r.solve.iterations as u64;
+        self.max_residual = self.max_residual.max(r.solve.residual);
+        self.not_converged += u64::from(!r.solve.converged);
+        self.max_penetration = self.max_penetration.max(r.max_penetration);
+    }
+
+    fn mean(sum: u64, n: u64) -> f64 {
+        if n == 0 {
+            0.0
+        } else {
+            sum as f64 / n as f64
+        }
+    }
+}
+
+/// `summary.json`: the contract users' scripts rely on (keys are only ever added).
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    pub steps: u64,
+    pub time: f64,
+    pub bodies: usize,
+    pub threads: usize,
+    pub subdomains: String,
+    pub timings_s: PhaseTimes,
+    pub contacts: ContactSummary,
+    pub solver: SolverSummary,
+    pub max_penetration: f64,
+    pub kinetic_energy: f64,
+    pub state_digest: String,
+}
+
+/// `summary.json` → `contacts`.
+#[derive(Clone, Debug, Serialize)]
+pub struct ContactSummary {
+    pub mean: f64,
+    pub max: usize,
+}
+
+/// `summary.json` → `solver`.
+#[derive(Clone, Debug, Serialize)]
+pub struct SolverSummary {
+    pub mean_iterations: f64,
+    pub max_residual: f64,
+    pub steps_not_converged: u64,
+    pub tolerance: f64,
+    pub norm: crate::solver::ConvergenceNorm,
+}
+
+impl Summary {
+    /// Summary of `world` after a run with statistics `stats`.
+    pub fn new(world: &World, stats: &RunStats, threads: usize) -> Self {
+        Summary {
+            steps: world.step_index,
+            time: world.time,
+            bodies: world.bodies.len(),
+            threads,
+            subdomains: "1x1x1".into(),
+            timings_s: world.timers,
+            contacts: ContactSummary {
+                mean: RunStats::mean(stats.contacts_sum, stats.steps),
+                max: stats.contacts_max,
+            },
+            solver: SolverSummary {
+                mean_iterations: RunStats::mean(stats.iterations_sum, stats.steps),
+                max_residual: stats.max_residual,
+                steps_not_converged: stats.not_converged,
+                tolerance: world.settings.solver.tolerance,
+                norm: world.settings.solver.norm,
+            },
+            max_penetration: stats.max_penetration,
+            kinetic_energy: world.bodies.kinetic_energy(),
+            state_digest: state_digest(&world.bodies),
+        }
+    }
+
+    /// Writes the summary as pretty JSON, atomically (temporary file, then rename).
+    pub fn write(&self, path: &Path) -> std::io::Result<()> {
+        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
+        write_atomic(path, text.as_bytes())
+    }
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a
+/// crash never leaves a half-written file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let tmp = path.with_extension("tmp");
+    {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+    }
+    std::fs::rename(&tmp, path)
+}
+
+/// Header of `series.csv` (units in brackets).
+pub const SERIES_HEADER: &str = "step,time_s,contacts,iterations,quad,residual,converged,max_penetration_m,kinetic_energy_J,t_detection_s,t_nlgs_s,t_other_s";
+
+/// One `series.csv` row.
+pub fn series_row(r: &StepReport, kinetic_energy: f64) -> String {
+    format!(
+        "{},{:.9e},{},{},{:.6e},{:.6e},{},{:.6e},{:.9e},{:.6e},{:.6e},{:.6e}",
+        r.step,
+        r.time,
+        r.contacts,
+        r.solve.iterations,
+        r.solve.quad,
+        r.solve.residual,
+        u8::from(r.solve.converged),
+        r.max_penetration,
+        kinetic_energy,
+        r.times.detection,
+        r.times.nlgs,
+        r.times.other
+    )
+}

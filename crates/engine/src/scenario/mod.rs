@@ -1,0 +1,514 @@
+//! Scenario files (TOML): bodies, materials, friction, gravity, time stepping, solver, drivers,
+//! outputs. Every field is checked; an error names the field, the value and what is allowed.
+//!
+//! ```toml
+//! [simulation]
+//! dt = 2e-4            # s
+//! steps = 5000         # or: duration = 1.0 (s)
+//! theta = 0.5          # in [0.5, 1]
+//! gravity = [0, 0, -9.81]
+//! alert = 1e-3         # m
+//! output_interval = 50 # steps between recorded rows
+//!
+//! [solver]
+//! tolerance = 1e-4
+//! max_iterations = 1000
+//! norm = "quad"        # or "natural_map"
+//!
+//! [materials]
+//! stone = 2700         # density, kg/m³
+//!
+//! [friction]
+//! default = 1.0
+//! pairs = [{ groups = ["grain", "wall"], mu = 0.8 }]
+//!
+//! [[body]]
+//! shape = "plane"
+//! point = [0, 0, 0]
+//! normal = [0, 0, 1]
+//! group = "wall"
+//!
+//! [[body]]
+//! shape = "box"        # or "polyhedron" with vertices = [[x, y, z], …]
+//! half_extents = [0.05, 0.05, 0.05]
+//! center = [0, 0, 0.05]
+//! material = "stone"
+//! group = "grain"
+//! kind = "dynamic"     # or "kinematic" (with a [body.driver]) or "fixed"
+//!
+//! [[grains]]           # packs of random grains, see GrainPack
+//! count = 300
+//! min = [0, 0, 0.02]
+//! max_xy = [0.4, 0.4]
+//! diameter = [0.025, 0.05]
+//! material = "stone"
+//! group = "grain"
+//! ```
+
+pub mod generate;
+pub mod presets;
+
+pub use generate::GrainPack;
+
+use crate::bodies::{BodyKind, BodySet, Driver};
+use crate::laws::FrictionTable;
+use crate::math::{DQuat, DVec3};
+use crate::shapes::ConvexPolyhedron;
+use crate::solver::SolverSettings;
+use crate::world::{StepSettings, World};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// A scenario error: one message naming the field, the value and what is allowed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct ScenarioError(pub String);
+
+fn err<T>(msg: impl Into<String>) -> Result<T, ScenarioError> {
+    Err(ScenarioError(msg.into()))
+}
+
+/// `[simulation]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Simulation {
+    pub dt: f64,
+    #[serde(default)]
+    pub steps: Option<u64>,
+    #[serde(default)]
+    pub duration: Option<f64>,
+    #[serde(default = "half")]
+    pub theta: f64,
+    #[serde(default = "earth")]
+    pub gravity: [f64; 3],
+    #[serde(default = "default_alert")]
+    pub alert: f64,
+    #[serde(default = "default_interval")]
+    pub output_interval: u64,
+}
+
+fn half() -> f64 {
+    0.5
+}
+fn earth() -> [f64; 3] {
+    [0.0, 0.0, -9.81]
+}
+fn default_alert() -> f64 {
+    1e-3
+}
+fn default_interval() -> u64 {
+    50
+}
+
+/// `[friction]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Friction {
+    pub default: f64,
+    #[serde(default)]
+    pub pairs: Vec<FrictionPair>,
+}
+
+/// One entry of `friction.pairs`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionPair {
+    pub groups: [String; 2],
+    pub mu: f64,
+}
+
+/// Shape of a `[[body]]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ShapeKind {
+    Polyhedron,
+    Box,
+    Plane,
+}
+
+/// One `[[body]]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodySpec {
+    pub shape: ShapeKind,
+    #[serde(default = "dynamic")]
+    pub kind: BodyKind,
+    #[serde(default = "default_group")]
+    pub group: String,
+    /// Material name (density from `[materials]`); required for dynamic polyhedra and boxes.
+    #[serde(default)]
+    pub material: Option<String>,
+    /// Polyhedron vertices, world coordinates (m).
+    #[serde(default)]
+    pub vertices: Option<Vec<[f64; 3]>>,
+    /// Box half extents (m).
+    #[serde(default)]
+    pub half_extents: Option<[f64; 3]>,
+    /// Box centre (m).
+    #[serde(default)]
+    pub center: Option<[f64; 3]>,
+    /// Box rotation as a rotation vector (axis × angle, rad).
+    #[serde(default)]
+    pub rotation: Option<[f64; 3]>,
+    /// Plane point and outward normal.
+    #[serde(default)]
+    pub point: Option<[f64; 3]>,
+    #[serde(default)]
+    pub normal: Option<[f64; 3]>,
+    /// Initial velocities.
+    #[serde(default)]
+    pub velocity: Option<[f64; 3]>,
+    #[serde(default)]
+    pub angular_velocity: Option<[f64; 3]>,
+    /// Imposed velocity (kinematic bodies).
+    #[serde(default)]
+    pub driver: Option<Driver>,
+}
+
+fn dynamic() -> BodyKind {
+    BodyKind::Dynamic
+}
+fn default_group() -> String {
+    "default".into()
+}
+
+/// One `[[grains]]` pack.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GrainsSpec {
+    #[serde(flatten)]
+    pub pack: GrainPack,
+    pub material: String,
+    #[serde(default = "grain_group")]
+    pub group: String,
+}
+
+fn grain_group() -> String {
+    "grain".into()
+}
+
+/// A whole scenario file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    pub simulation: Simulation,
+    #[serde(default)]
+    pub solver: SolverSettings,
+    #[serde(default)]
+    pub materials: BTreeMap<String, f64>,
+    pub friction: Friction,
+    #[serde(default, rename = "body")]
+    pub bodies: Vec<BodySpec>,
+    #[serde(default)]
+    pub grains: Vec<GrainsSpec>,
+}
+
+fn vec3(a: [f64; 3]) -> DVec3 {
+    DVec3::from_array(a)
+}
+
+fn finite3(field: &str, a: [f64; 3]) -> Result<DVec3, ScenarioError> {
+    if a.iter().all(|x| x.is_finite()) {
+        Ok(vec3(a))
+    } else {
+        err(format!("{field} = {a:?} must have finite components"))
+    }
+}
+
+impl Scenario {
+    /// Parses TOML text (syntax and unknown-field errors come from the TOML reader, with the
+    /// line), then validates.
+    pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
+        let s: Scenario = toml::from_str(text).map_err(|e| ScenarioError(e.to_string()))?;
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// Number of steps to run.
+    pub fn steps(&self) -> u64 {
+        match (self.simulation.steps, self.simulation.duration) {
+            (Some(n), _) => n,
+            (None, Some(d)) => (d / self.simulation.dt).round() as u64,
+            (None, None) => 0,
+        }
+    }
+
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), ScenarioError> {
+        let s = &self.simulation;
+        if !(s.dt.is_finite() && s.dt > 0.0 && s.dt <= 0.1) {
+            return err(format!("simulation.dt = {} must be in (0, 0.1] s", s.dt));
+        }
+        match (s.steps, s.duration) {
+            (Some(_), Some(_)) => {
+                return err("simulation: give either steps or duration, not both");
+            }
+            (None, None) => return err("simulation: steps or duration is required"),
+            (None, Some(d)) if !(d.is_finite() && d > 0.0) => {
+                return err(format!("simulation.duration = {d} must be > 0 s"));
+            }
+            _ => {}
+        }
+        if !(0.5..=1.0).contains(&s.theta) {
+            return err(format!(
+                "simulation.theta = {} must be in [0.5, 1]",
+                s.theta
+            ));
+        }
+        finite3("simulation.gravity", s.gravity)?;
+        if !(s.alert.is_finite() && s.alert > 0.0) {
+            return err(format!("simulation.alert = {} must be > 0 m", s.alert));
+        }
+        if s.output_interval == 0 {
+            return err("simulation.output_interval = 0 must be ≥ 1 step");
+        }
+        self.solver.validate().map_err(ScenarioError)?;
+        for (name, rho) in &self.materials {
+            if !(rho.is_finite() && *rho > 0.0) {
+                return err(format!(
+                    "materials.{name} = {rho} must be a density > 0 kg/m³"
+                ));
+            }
+        }
+        let mu_ok = |mu: f64| mu.is_finite() && mu >= 0.0;
+        if !mu_ok(self.friction.default) {
+            return err(format!(
+                "friction.default = {} must be ≥ 0",
+                self.friction.default
+            ));
+        }
+        for (k, p) in self.friction.pairs.iter().enumerate() {
+            if !mu_ok(p.mu) {
+                return err(format!("friction.pairs[{k}].mu = {} must be ≥ 0", p.mu));
+            }
+        }
+        for (k, b) in self.bodies.iter().enumerate() {
+            self.validate_body(k, b)?;
+        }
+        for (k, g) in self.grains.iter().enumerate() {
+            g.pack
+                .validate()
+                .map_err(|e| ScenarioError(format!("grains[{k}].{e}")))?;
+            self.density(&format!("grains[{k}]"), Some(&g.material))?;
+        }
+        if self.bodies.is_empty() && self.grains.is_empty() {
+            return err("the scenario has no [[body]] and no [[grains]]");
+        }
+        Ok(())
+    }
+
+    fn density(&self, at: &str, material: Option<&String>) -> Result<f64, ScenarioError> {
+        let Some(m) = material else {
+            return err(format!(
+                "{at}.material is required (one of {:?})",
+                self.material_names()
+            ));
+        };
+        match self.materials.get(m) {
+            Some(d) => Ok(*d),
+            None => err(format!(
+                "{at}.material = \"{m}\" is not defined in [materials] (defined: {:?})",
+                self.material_names()
+            )),
+        }
+    }
+
+    fn material_names(&self) -> Vec<&String> {
+        self.materials.keys().collect()
+    }
+
+    fn validate_body(&self, k: usize, b: &BodySpec) -> Result<(), ScenarioError> {
+        let at = format!("body[{k}]");
+        let forbid = |name: &str, present: bool| {
+            if present {
+                err(format!(
+                    "{at}.{name} is not allowed for shape = {:?}",
+                    b.shape
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        match b.shape {
+            ShapeKind::Plane => {
+                if b.kind != BodyKind::Fixed {
+                    return err(format!(
+                        "{at}.kind = {:?}: a plane must be \"fixed\"",
+                        b.kind
+                    ));
+                }
+                let Some(p) = b.point else {
+                    return err(format!("{at}.point is required"));
+                };
+                let Some(n) = b.normal else {
+                    return err(format!("{at}.normal is required"));
+                };
+                finite3(&format!("{at}.point"), p)?;
+                let n = finite3(&format!("{at}.normal"), n)?;
+                if n.length() < 1e-12 {
+                    return err(format!("{at}.normal = {n:?} must be a non-zero vector"));
+                }
+                forbid("vertices", b.vertices.is_some())?;
+                forbid("half_extents", b.half_extents.is_some())?;
+                forbid("driver", b.driver.is_some())?;
+            }
+            ShapeKind::Box | ShapeKind::Polyhedron => {
+                if b.shape == ShapeKind::Box {
+                    let Some(h) = b.half_extents else {
+                        return err(format!("{at}.half_extents is required"));
+                    };
+                    let h = finite3(&format!("{at}.half_extents"), h)?;
+                    if h.min_element() <= 0.0 {
+                        return err(format!("{at}.half_extents = {h:?} must be > 0"));
+                    }
+                    let Some(c) = b.center else {
+                        return err(format!("{at}.center is required"));
+                    };
+                    finite3(&format!("{at}.center"), c)?;
+                    if let Some(r) = b.rotation {
+                        finite3(&format!("{at}.rotation"), r)?;
+                    }
+                    forbid("vertices", b.vertices.is_some())?;
+                } else {
+                    if b.vertices.is_none() {
+                        return err(format!("{at}.vertices is required"));
+                    }
+                    forbid("half_extents", b.half_extents.is_some())?;
+                    forbid("center", b.center.is_some())?;
+                    forbid("rotation", b.rotation.is_some())?;
+                }
+                forbid("point", b.point.is_some())?;
+                forbid("normal", b.normal.is_some())?;
+                self.build_shape(k, b)?;
+                if b.kind == BodyKind::Dynamic {
+                    self.density(&at, b.material.as_ref())?;
+                }
+            }
+        }
+        if let Some(v) = b.velocity {
+            finite3(&format!("{at}.velocity"), v)?;
+        }
+        if let Some(v) = b.angular_velocity {
+            finite3(&format!("{at}.angular_velocity"), v)?;
+        }
+        match (&b.driver, b.kind) {
+            (Some(d), BodyKind::Kinematic) => d
+                .validate()
+                .map_err(|e| ScenarioError(format!("{at}.driver.{e}")))?,
+            (Some(_), kind) => {
+                return err(format!(
+                    "{at}.driver is only allowed for kind = \"kinematic\" (got {kind:?})"
+                ))
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn build_shape(
+        &self,
+        k: usize,
+        b: &BodySpec,
+    ) -> Result<crate::shapes::PolyhedronBuild, ScenarioError> {
+        let at = format!("body[{k}]");
+        let built = match b.shape {
+            ShapeKind::Box => {
+                let h = vec3(b.half_extents.unwrap_or_default());
+                ConvexPolyhedron::cuboid(h).map(|mut p| {
+                    let q = DQuat::from_scaled_axis(vec3(b.rotation.unwrap_or_default()));
+                    p.position = vec3(b.center.unwrap_or_default()) + q * p.position;
+                    p.orientation = (q * p.orientation).normalize();
+                    p
+                })
+            }
+            _ => {
+                let pts: Vec<DVec3> = b
+                    .vertices
+                    .as_deref()
+                    .unwrap_or_default()
+                    .iter()
+                    .map(|a| vec3(*a))
+                    .collect();
+                ConvexPolyhedron::from_points(&pts)
+            }
+        };
+        built.map_err(|e| {
+            let field = if b.shape == ShapeKind::Box {
+                "half_extents"
+            } else {
+                "vertices"
+            };
+            ScenarioError(format!("{at}.{field}: {e}"))
+        })
+    }
+
+    /// Builds the world. Groups are numbered in order of first appearance (bodies, then grain
+    /// packs, then friction pairs).
+    pub fn build(&self) -> Result<World, ScenarioError> {
+        self.validate()?;
+        let mut groups: Vec<String> = Vec::new();
+        let mut group_id = |name: &str| -> u32 {
+            match groups.iter().position(|g| g == name) {
+                Some(i) => i as u32,
+                None => {
+                    groups.push(name.to_string());
+                    (groups.len() - 1) as u32
+                }
+            }
+        };
+        let mut bodies = BodySet::default();
+        for (k, b) in self.bodies.iter().enumerate() {
+            let g = group_id(&b.group);
+            let i = match b.shape {
+                ShapeKind::Plane => bodies.add_plane(
+                    vec3(b.point.unwrap_or_default()),
+                    vec3(b.normal.unwrap_or_default()),
+                    g,
+                ),
+                _ => {
+                    let shape = self.build_shape(k, b)?;
+                    let density = match b.kind {
+                        BodyKind::Dynamic => {
+                            self.density(&format!("body[{k}]"), b.material.as_ref())?
+                        }
+                        _ => 1.0,
+                    };
+                    bodies.add_polyhedron(shape, density, b.kind, g)
+                }
+            };
+            if let Some(v) = b.velocity {
+                bodies.velocity[i] = vec3(v);
+            }
+            if let Some(w) = b.angular_velocity {
+                bodies.set_angular_velocity(i, vec3(w));
+            }
+            bodies.driver[i] = b.driver.clone();
+        }
+        for (k, gs) in self.grains.iter().enumerate() {
+            let g = group_id(&gs.group);
+            let density = self.density(&format!("grains[{k}]"), Some(&gs.material))?;
+            let grains = gs
+                .pack
+                .build()
+                .map_err(|e| ScenarioError(format!("grains[{k}]: {e}")))?;
+            for p in grains {
+                bodies.add_polyhedron(p, density, BodyKind::Dynamic, g);
+            }
+        }
+        let mut friction = FrictionTable::new(self.friction.default);
+        for p in &self.friction.pairs {
+            let (a, b) = (group_id(&p.groups[0]), group_id(&p.groups[1]));
+            friction.set(a, b, p.mu);
+        }
+        let s = &self.simulation;
+        let settings = StepSettings {
+            dt: s.dt,
+            theta: s.theta,
+            gravity: vec3(s.gravity),
+            alert: s.alert,
+            solver: self.solver.clone(),
+            ..StepSettings::default()
+        };
+        Ok(World::new(bodies, friction, settings))
+    }
+}

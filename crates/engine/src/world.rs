@@ -1,0 +1,219 @@
+//! The Moreau-Jean time step (θ-method) over bodies → detection → contacts → local problems →
+//! NLGS → update, with per-phase timers.
+//!
+//! One step `[tᵢ, tᵢ₊₁]`, `h = tᵢ₊₁ − tᵢ`:
+//! 1. detect contacts at `qᵢ` (gaps, normals, frames), warm-start from the previous step;
+//! 2. free velocities: dynamic bodies `v_free = vᵢ + h g`, `ω_free = ωᵢ`; kinematic bodies take
+//!    their driver's velocity at `tᵢ₊₁`; fixed bodies 0;
+//! 3. local problems and NLGS give `Vᵢ₊₁` and the impulses `r`;
+//! 4. update: `xᵢ₊₁ = xᵢ + h (θ vᵢ₊₁ + (1 − θ) vᵢ)`, `qᵢ₊₁ = exp(h (θ ωᵢ₊₁ + (1 − θ) ωᵢ)) qᵢ`,
+//!    world angular momentum `Lᵢ₊₁ = Lᵢ + I_w(qᵢ)(ωᵢ₊₁ − ω_free)` (the contact torques' impulse),
+//!    and `ωᵢ₊₁ = I_w(qᵢ₊₁)⁻¹ Lᵢ₊₁`.
+
+use crate::bodies::{BodyKind, BodySet};
+use crate::contacts::ContactSet;
+use crate::detection::{Detector, RawContact};
+use crate::laws::FrictionTable;
+use crate::math::{DMat3, DQuat, DVec3};
+use crate::solver::delassus::build_local_problems;
+use crate::solver::{LocalProblem, Nlgs, SolveReport, SolverBody, SolverSettings};
+use crate::timing::{Lap, PhaseTimes};
+use serde::{Deserialize, Serialize};
+
+/// Time-stepping settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepSettings {
+    /// Time step h (s).
+    pub dt: f64,
+    /// θ ∈ [0.5, 1].
+    pub theta: f64,
+    /// Gravity (m/s²).
+    pub gravity: DVec3,
+    /// Alert distance (m): pairs closer than this become contacts.
+    pub alert: f64,
+    /// A contact persists (warm start) if it moved less than this fraction of the smaller body
+    /// radius in body 1's frame.
+    pub match_fraction: f64,
+    /// NLGS settings.
+    pub solver: SolverSettings,
+}
+
+impl Default for StepSettings {
+    fn default() -> Self {
+        Self {
+            dt: 2e-4,
+            theta: 0.5,
+            gravity: DVec3::new(0.0, 0.0, -9.81),
+            alert: 1e-3,
+            match_fraction: 0.1,
+            solver: SolverSettings::default(),
+        }
+    }
+}
+
+/// What one step did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StepReport {
+    pub step: u64,
+    /// Time at the end of the step.
+    pub time: f64,
+    pub contacts: usize,
+    pub solve: SolveReport,
+    /// Largest overlap `max(−g, 0)` among the contacts detected at the start of the step (m).
+    pub max_penetration: f64,
+    pub times: PhaseTimes,
+}
+
+/// A simulation: bodies, contacts, laws, settings, clock and timers.
+#[derive(Debug)]
+pub struct World {
+    pub bodies: BodySet,
+    pub contacts: ContactSet,
+    pub friction: FrictionTable,
+    pub settings: StepSettings,
+    /// Current time (s).
+    pub time: f64,
+    /// Steps done.
+    pub step_index: u64,
+    /// Cumulated phase times.
+    pub timers: PhaseTimes,
+    detector: Detector,
+    raw: Vec<RawContact>,
+    previous: ContactSet,
+    locals: Vec<LocalProblem>,
+    solver_bodies: Vec<SolverBody>,
+}
+
+impl World {
+    /// A world at t = 0.
+    /// Kinematic bodies start with their driver's velocity at t = 0.
+    pub fn new(mut bodies: BodySet, friction: FrictionTable, settings: StepSettings) -> Self {
+        for i in 0..bodies.len() {
+            if let (BodyKind::Kinematic, Some(d)) = (bodies.kind[i], &bodies.driver[i]) {
+                let (v, w) = d.velocity(0.0);
+                bodies.velocity[i] = v;
+                bodies.angular_velocity[i] = w;
+            }
+        }
+        Self {
+            bodies,
+            contacts: ContactSet::default(),
+            friction,
+            settings,
+            time: 0.0,
+            step_index: 0,
+            timers: PhaseTimes::default(),
+            detector: Detector::default(),
+            raw: Vec::new(),
+            previous: ContactSet::default(),
+            locals: Vec::new(),
+            solver_bodies: Vec::new(),
+        }
+    }
+
+    /// Advances one time step.
+    pub fn step(&mut self) -> StepReport {
+        let s = &self.settings;
+        let (h, theta) = (s.dt, s.theta);
+        let t1 = self.time + h;
+        let mut lap = Lap::start();
+        let mut times = PhaseTimes::default();
+
+        // 1. Detection at qᵢ and warm start.
+        std::mem::swap(&mut self.previous, &mut self.contacts);
+        self.detector.detect(&self.bodies, s.alert, &mut self.raw);
+        self.contacts.rebuild(
+            &self.raw,
+            &self.bodies,
+            &self.friction,
+            &self.previous,
+            s.match_fraction,
+        );
+        if !s.solver.warm_start {
+            self.contacts
+                .impulse
+                .iter_mut()
+                .for_each(|r| *r = DVec3::ZERO);
+        }
+        let max_penetration = self.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g));
+        times.detection = lap.lap();
+
+        // 2. Free velocities.
+        let b = &self.bodies;
+        let n = b.len();
+        self.solver_bodies.clear();
+        for i in 0..n {
+            let (v, w) = match b.kind[i] {
+                BodyKind::Dynamic => (b.velocity[i] + s.gravity * h, b.angular_velocity[i]),
+                BodyKind::Kinematic => match &b.driver[i] {
+                    Some(d) => d.velocity(t1),
+                    None => (DVec3::ZERO, DVec3::ZERO),
+                },
+                BodyKind::Fixed => (DVec3::ZERO, DVec3::ZERO),
+            };
+            let inv_inertia = b.inv_inertia_world(i);
+            self.solver_bodies.push(SolverBody {
+                v,
+                w,
+                inv_mass: b.inv_mass[i],
+                inv_inertia,
+            });
+        }
+        let free_w: Vec<DVec3> = self.solver_bodies.iter().map(|sb| sb.w).collect();
+        times.other += lap.lap();
+
+        // 3. Local problems and NLGS.
+        build_local_problems(&self.contacts, b, &self.solver_bodies, &mut self.locals);
+        let nlgs = Nlgs {
+            settings: s.solver.clone(),
+            h_theta: h * theta,
+        };
+        let solve = nlgs.solve(
+            &mut self.locals,
+            &mut self.solver_bodies,
+            &mut self.contacts.status,
+        );
+        for (r, c) in self.contacts.impulse.iter_mut().zip(&self.locals) {
+            *r = c.r;
+        }
+        times.nlgs = lap.lap();
+
+        // 4. Update.
+        let b = &mut self.bodies;
+        for (i, sb) in self.solver_bodies.iter().enumerate() {
+            let (v1, w1) = (sb.v, sb.w);
+            let (v0, w0) = (b.velocity[i], b.angular_velocity[i]);
+            if b.kind[i] == BodyKind::Fixed {
+                continue;
+            }
+            b.position[i] += (v1 * theta + v0 * (1.0 - theta)) * h;
+            let rot = (w1 * theta + w0 * (1.0 - theta)) * h;
+            let q_old = b.orientation[i];
+            b.orientation[i] = (DQuat::from_scaled_axis(rot) * q_old).normalize();
+            b.velocity[i] = v1;
+            if b.kind[i] == BodyKind::Dynamic {
+                let i_w_old = {
+                    let r = DMat3::from_quat(q_old);
+                    r * DMat3::from_diagonal(b.inertia[i]) * r.transpose()
+                };
+                b.angular_momentum[i] += i_w_old * (w1 - free_w[i]);
+                b.angular_velocity[i] = b.inv_inertia_world(i) * b.angular_momentum[i];
+            } else {
+                b.angular_velocity[i] = w1;
+            }
+        }
+        self.time = t1;
+        self.step_index += 1;
+        times.other += lap.lap();
+        times.total = times.detection + times.nlgs + times.other;
+        self.timers += times;
+        StepReport {
+            step: self.step_index,
+            time: self.time,
+            contacts: self.contacts.len(),
+            solve,
+            max_penetration,
+            times,
+        }
+    }
+}
