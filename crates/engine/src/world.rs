@@ -8,15 +8,19 @@
 //! 3. local problems and NLGS give `Vᵢ₊₁` and the impulses `r`;
 //! 4. update: `xᵢ₊₁ = xᵢ + h (θ vᵢ₊₁ + (1 − θ) vᵢ)`, `qᵢ₊₁ = exp(h (θ ωᵢ₊₁ + (1 − θ) ωᵢ)) qᵢ`,
 //!    world angular momentum `Lᵢ₊₁ = Lᵢ + I_w(qᵢ)(ωᵢ₊₁ − ω_free)` (the contact torques' impulse),
-//!    and `ωᵢ₊₁ = I_w(qᵢ₊₁)⁻¹ Lᵢ₊₁`.
+//!    and `ωᵢ₊₁ = I_w(qᵢ₊₁)⁻¹ Lᵢ₊₁`; overlaps are reduced by a position-only pseudo-velocity
+//!    (see [`crate::solver::correction`]), which leaves the velocities untouched.
 
 use crate::bodies::{BodyKind, BodySet};
 use crate::contacts::ContactSet;
 use crate::detection::{Detector, RawContact};
 use crate::laws::FrictionTable;
 use crate::math::{DMat3, DQuat, DVec3};
+use crate::solver::correction::pseudo_velocities;
 use crate::solver::delassus::build_local_problems;
-use crate::solver::{LocalProblem, Nlgs, SolveReport, SolverBody, SolverSettings};
+use crate::solver::{
+    CorrectionSettings, LocalProblem, Nlgs, SolveReport, SolverBody, SolverSettings,
+};
 use crate::timing::{Lap, PhaseTimes};
 use serde::{Deserialize, Serialize};
 
@@ -36,6 +40,8 @@ pub struct StepSettings {
     pub match_fraction: f64,
     /// NLGS settings.
     pub solver: SolverSettings,
+    /// Overlap post-stabilisation.
+    pub correction: CorrectionSettings,
 }
 
 impl Default for StepSettings {
@@ -47,6 +53,7 @@ impl Default for StepSettings {
             alert: 1e-3,
             match_fraction: 0.1,
             solver: SolverSettings::default(),
+            correction: CorrectionSettings::default(),
         }
     }
 }
@@ -82,6 +89,7 @@ pub struct World {
     previous: ContactSet,
     locals: Vec<LocalProblem>,
     solver_bodies: Vec<SolverBody>,
+    pseudo: Vec<SolverBody>,
 }
 
 impl World {
@@ -108,6 +116,7 @@ impl World {
             previous: ContactSet::default(),
             locals: Vec::new(),
             solver_bodies: Vec::new(),
+            pseudo: Vec::new(),
         }
     }
 
@@ -121,7 +130,8 @@ impl World {
 
         // 1. Detection at qᵢ and warm start.
         std::mem::swap(&mut self.previous, &mut self.contacts);
-        self.detector.detect(&self.bodies, s.alert, &mut self.raw);
+        self.detector
+            .detect(&self.bodies, s.alert, s.dt, &mut self.raw);
         self.contacts.rebuild(
             &self.raw,
             &self.bodies,
@@ -176,6 +186,13 @@ impl World {
         for (r, c) in self.contacts.impulse.iter_mut().zip(&self.locals) {
             *r = c.r;
         }
+        let corrected = pseudo_velocities(
+            &s.correction,
+            h,
+            &self.locals,
+            &self.solver_bodies,
+            &mut self.pseudo,
+        );
         times.nlgs = lap.lap();
 
         // 4. Update.
@@ -186,8 +203,13 @@ impl World {
             if b.kind[i] == BodyKind::Fixed {
                 continue;
             }
-            b.position[i] += (v1 * theta + v0 * (1.0 - theta)) * h;
-            let rot = (w1 * theta + w0 * (1.0 - theta)) * h;
+            let (pv, pw) = if corrected {
+                (self.pseudo[i].v, self.pseudo[i].w)
+            } else {
+                (DVec3::ZERO, DVec3::ZERO)
+            };
+            b.position[i] += (v1 * theta + v0 * (1.0 - theta) + pv) * h;
+            let rot = (w1 * theta + w0 * (1.0 - theta) + pw) * h;
             let q_old = b.orientation[i];
             b.orientation[i] = (DQuat::from_scaled_axis(rot) * q_old).normalize();
             b.velocity[i] = v1;

@@ -621,6 +621,14 @@ proptest! {
     }
 }
 
+/// Seeds that once failed (with the shape generators of the time): a face tied with a touching
+/// edge pair beside it clipping to nothing; parry returning a wrong normal with the right depth.
+#[test]
+fn regression_seeds() {
+    run_scenario("grazing", 2889414386971713489, |rng| at_separation(rng, 1));
+    run_scenario("edge crossing", 1905457300341688780, edge_crossing);
+}
+
 /// Whole-run statistics of the tolerances, printed with `--nocapture`.
 #[test]
 fn tolerance_margins() {

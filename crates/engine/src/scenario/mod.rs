@@ -15,6 +15,10 @@
 //! max_iterations = 1000
 //! norm = "quad"        # or "natural_map"
 //!
+//! [correction]        # overlap post-stabilisation (position only); fraction = 0 turns it off
+//! fraction = 0.2
+//! slop = 1e-5          # m
+//!
 //! [materials]
 //! stone = 2700         # density, kg/m³
 //!
@@ -54,7 +58,7 @@ use crate::bodies::{BodyKind, BodySet, Driver};
 use crate::laws::FrictionTable;
 use crate::math::{DQuat, DVec3};
 use crate::shapes::ConvexPolyhedron;
-use crate::solver::SolverSettings;
+use crate::solver::{CorrectionSettings, SolverSettings};
 use crate::world::{StepSettings, World};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -195,6 +199,8 @@ pub struct Scenario {
     #[serde(default)]
     pub solver: SolverSettings,
     #[serde(default)]
+    pub correction: CorrectionSettings,
+    #[serde(default)]
     pub materials: BTreeMap<String, f64>,
     pub friction: Friction,
     #[serde(default, rename = "body")]
@@ -263,6 +269,7 @@ impl Scenario {
             return err("simulation.output_interval = 0 must be ≥ 1 step");
         }
         self.solver.validate().map_err(ScenarioError)?;
+        self.correction.validate().map_err(ScenarioError)?;
         for (name, rho) in &self.materials {
             if !(rho.is_finite() && *rho > 0.0) {
                 return err(format!(
@@ -507,6 +514,7 @@ impl Scenario {
             gravity: vec3(s.gravity),
             alert: s.alert,
             solver: self.solver.clone(),
+            correction: self.correction.clone(),
             ..StepSettings::default()
         };
         Ok(World::new(bodies, friction, settings))

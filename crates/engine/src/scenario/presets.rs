@@ -8,11 +8,13 @@ use crate::solver::SolverSettings;
 use std::collections::BTreeMap;
 
 /// Random ballast grains (12–20 vertices, equivalent diameters `[d_min, d_max]`) poured from a
-/// loose lattice into a square box of half-spaces (floor and four walls), about ten layers
+/// loose lattice into a square box of half-spaces (floor and four walls), about five layers
 /// high. Friction μ = 1 grain–grain, 0.8 grain–wall; density 2700 kg/m³; dt = 2e-4 s.
 pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenario {
-    let pitch = 1.25 * diameter[1];
-    let side = ((grains as f64 / 10.0).sqrt().ceil().max(2.0)) * pitch + 1e-3;
+    // Lattice pitch ≈ 2 × 1.02 × circumradius, and random grains of volume-equivalent diameter d
+    // have circumradii up to ≈ 0.75 d.
+    let pitch = 1.53 * diameter[1];
+    let side = ((grains as f64 / 5.0).sqrt().ceil().max(2.0)) * pitch + 1e-3;
     let wall = |point: [f64; 3], normal: [f64; 3]| BodySpec {
         shape: ShapeKind::Plane,
         kind: BodyKind::Fixed,
@@ -43,6 +45,7 @@ pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenari
             max_iterations: 200,
             ..Default::default()
         },
+        correction: Default::default(),
         materials: BTreeMap::from([("stone".to_string(), 2700.0)]),
         friction: Friction {
             default: 1.0,

@@ -11,9 +11,11 @@
 //! `W` is never assembled off its diagonal blocks: the solver keeps `V = V_free + M⁻¹ H r`
 //! current, so `u_α` is read from the two bodies' velocities at any time.
 
+pub mod correction;
 pub mod delassus;
 pub mod nlgs;
 
+pub use correction::CorrectionSettings;
 pub use delassus::{LocalProblem, SolverBody};
 pub use nlgs::{Nlgs, SolveReport};
 

@@ -11,10 +11,10 @@
 //!    with the support functions of both bodies, so a round-off misjudged Gauss-map test can never
 //!    report a separation that does not exist. A first pass skips A's edges lying far beyond a
 //!    face plane of B; the manifold it yields proves whether the bodies are close enough for that
-//!    to be exact, and otherwise every edge pair is tested again (see [`edge_axis`]).
+//!    to be exact, and otherwise every edge pair is tested again (see `edge_axis`).
 //! 3. The axis of largest separation wins, faces before edges and A's faces before B's within a
 //!    small tolerance, which keeps face–face manifolds stable (a face is skipped if its clipped
-//!    points do not reach the axis depth, see [`choose`]). A face axis gives a reference face
+//!    points do not reach the axis depth, see `choose`). A face axis gives a reference face
 //!    and an incident face on the other body; the incident polygon is clipped by the side planes
 //!    of the reference face (Sutherland–Hodgman) and every clipped point within the alert distance
 //!    becomes a contact point. An edge axis gives one point between the closest points of the two
@@ -23,7 +23,8 @@
 //! Touching or overlapping, the largest separation over these axes is minus the penetration
 //! depth (the largest over all directions). Apart, another direction (say, for two vertices
 //! facing each other) may separate the bodies a little more, so a pair slightly farther apart
-//! than the alert distance can still get a manifold, always with positive gaps.
+//! than the alert distance can still get a manifold, with gaps positive up to the preference
+//! tolerance.
 //!
 //! Why not parry's manifolds: `parry3d` contact manifolds would need filtering before use in
 //! NSCD (points beyond the prediction distance, duplicate points, an extra GJK point), and a
@@ -38,9 +39,10 @@
 use super::{reduce_to_four, Manifold, ManifoldPoint, WorldPolyhedron};
 use crate::math::DVec3;
 
-/// Preference tolerance between axes, relative to the smaller circumradius: an axis must beat a
-/// preferred one (faces over edges, A's faces over B's) by more than this to be chosen. Relative
-/// to the *smaller* body so that a grain on a 20 m box keeps a tolerance at the grain's scale.
+/// Preference tolerance between axes, relative to the smaller circumradius: the first axis in
+/// the order A's face, B's face, edge pair whose separation is within this of the largest one is
+/// chosen. Relative to the *smaller* body so that a grain on a 20 m box keeps a tolerance at the
+/// grain's scale (it bounds the error on the deepest gap).
 const PREFER_RELATIVE: f64 = 1e-5;
 /// Edge pairs whose directions make an angle with squared sine below this are parallel: their
 /// cross product has no reliable direction, and the face axes already cover them.
