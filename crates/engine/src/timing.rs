@@ -10,6 +10,10 @@ pub struct PhaseTimes {
     pub detection: f64,
     /// Local problems and NLGS.
     pub nlgs: f64,
+    /// Of `nlgs`: subdomain sweeps (domain decomposition only).
+    pub subdomains: f64,
+    /// Of `nlgs`: interface sweeps (domain decomposition only).
+    pub interface: f64,
     /// Free velocities, kinematic drivers, position/orientation update.
     pub other: f64,
     /// Whole step.
@@ -20,6 +24,8 @@ impl std::ops::AddAssign for PhaseTimes {
     fn add_assign(&mut self, o: Self) {
         self.detection += o.detection;
         self.nlgs += o.nlgs;
+        self.subdomains += o.subdomains;
+        self.interface += o.interface;
         self.other += o.other;
         self.total += o.total;
     }

@@ -19,7 +19,8 @@ use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::pseudo_velocities;
 use crate::solver::delassus::build_local_problems;
 use crate::solver::{
-    CorrectionSettings, LocalProblem, Nlgs, SolveReport, SolverBody, SolverSettings,
+    ddm, CorrectionSettings, DdmSettings, LocalProblem, Nlgs, Partition, SolveReport, SolverBody,
+    SolverSettings,
 };
 use crate::timing::{Lap, PhaseTimes};
 use serde::{Deserialize, Serialize};
@@ -42,6 +43,8 @@ pub struct StepSettings {
     pub solver: SolverSettings,
     /// Overlap post-stabilisation.
     pub correction: CorrectionSettings,
+    /// Domain decomposition (Algorithm 1); `None` = monolithic NLGS.
+    pub ddm: Option<DdmSettings>,
 }
 
 impl Default for StepSettings {
@@ -54,6 +57,7 @@ impl Default for StepSettings {
             match_fraction: 0.1,
             solver: SolverSettings::default(),
             correction: CorrectionSettings::default(),
+            ddm: None,
         }
     }
 }
@@ -89,6 +93,7 @@ pub struct World {
     previous: ContactSet,
     locals: Vec<LocalProblem>,
     solver_bodies: Vec<SolverBody>,
+    free_w: Vec<DVec3>,
     pseudo: Vec<SolverBody>,
 }
 
@@ -116,14 +121,58 @@ impl World {
             previous: ContactSet::default(),
             locals: Vec::new(),
             solver_bodies: Vec::new(),
+            free_w: Vec::new(),
             pseudo: Vec::new(),
         }
     }
 
-    /// Advances one time step.
-    pub fn step(&mut self) -> StepReport {
+    /// The partition of this step: boxes over the dynamic bodies' centres, weighted by
+    /// `1 + number of contacts` when balancing by contacts.
+    pub fn partition(&self, d: &DdmSettings) -> Partition {
+        let n = self.bodies.len();
+        let mut weights = vec![1.0; n];
+        for k in 0..self.contacts.len() {
+            weights[self.contacts.body1[k] as usize] += 1.0;
+            weights[self.contacts.body2[k] as usize] += 1.0;
+        }
+        let dynamic: Vec<bool> = self
+            .bodies
+            .kind
+            .iter()
+            .map(|k| *k == BodyKind::Dynamic)
+            .collect();
+        Partition::build(
+            &self.bodies.position,
+            &dynamic,
+            d.subdomains,
+            d.balance,
+            &weights,
+        )
+    }
+
+    /// The NLGS solver configured for this world.
+    pub fn nlgs(&self) -> Nlgs {
+        Nlgs {
+            settings: self.settings.solver.clone(),
+            h_theta: self.settings.dt * self.settings.theta,
+        }
+    }
+
+    /// The local problems of the step being prepared (after [`World::prepare`]).
+    pub fn local_problems(&self) -> &[LocalProblem] {
+        &self.locals
+    }
+
+    /// The solver bodies (free velocities after [`World::prepare`]).
+    pub fn solver_bodies(&self) -> &[SolverBody] {
+        &self.solver_bodies
+    }
+
+    /// Steps 1–3 up to the local problems: detection at `qᵢ` with warm start, free velocities,
+    /// local problems. Returns the largest overlap and the phase times so far.
+    pub fn prepare(&mut self) -> (f64, PhaseTimes) {
         let s = &self.settings;
-        let (h, theta) = (s.dt, s.theta);
+        let h = s.dt;
         let t1 = self.time + h;
         let mut lap = Lap::start();
         let mut times = PhaseTimes::default();
@@ -150,9 +199,8 @@ impl World {
 
         // 2. Free velocities.
         let b = &self.bodies;
-        let n = b.len();
         self.solver_bodies.clear();
-        for i in 0..n {
+        for i in 0..b.len() {
             let (v, w) = match b.kind[i] {
                 BodyKind::Dynamic => (b.velocity[i] + s.gravity * h, b.angular_velocity[i]),
                 BodyKind::Kinematic => match &b.driver[i] {
@@ -169,20 +217,46 @@ impl World {
                 inv_inertia,
             });
         }
-        let free_w: Vec<DVec3> = self.solver_bodies.iter().map(|sb| sb.w).collect();
+        self.free_w.clear();
+        self.free_w.extend(self.solver_bodies.iter().map(|sb| sb.w));
         times.other += lap.lap();
 
-        // 3. Local problems and NLGS.
+        // 3. Local problems.
         build_local_problems(&self.contacts, b, &self.solver_bodies, &mut self.locals);
-        let nlgs = Nlgs {
-            settings: s.solver.clone(),
-            h_theta: h * theta,
+        times.nlgs += lap.lap();
+        (max_penetration, times)
+    }
+
+    /// Advances one time step.
+    pub fn step(&mut self) -> StepReport {
+        let (max_penetration, mut times) = self.prepare();
+        let mut lap = Lap::start();
+        let nlgs = self.nlgs();
+        let s = &self.settings;
+        let (h, theta) = (s.dt, s.theta);
+
+        // 3. NLGS, monolithic or domain-decomposed.
+        let solve = match &s.ddm {
+            None => nlgs.solve(
+                &mut self.locals,
+                &mut self.solver_bodies,
+                &mut self.contacts.status,
+            ),
+            Some(d) => {
+                let partition = self.partition(d);
+                let (report, t) = ddm::solve(
+                    &nlgs,
+                    d,
+                    &partition,
+                    &mut self.locals,
+                    &mut self.solver_bodies,
+                    &mut self.contacts.status,
+                );
+                times.subdomains = t.subdomains;
+                times.interface = t.interface;
+                report
+            }
         };
-        let solve = nlgs.solve(
-            &mut self.locals,
-            &mut self.solver_bodies,
-            &mut self.contacts.status,
-        );
         for (r, c) in self.contacts.impulse.iter_mut().zip(&self.locals) {
             *r = c.r;
         }
@@ -193,7 +267,8 @@ impl World {
             &self.solver_bodies,
             &mut self.pseudo,
         );
-        times.nlgs = lap.lap();
+        times.nlgs += lap.lap();
+        let free_w = &self.free_w;
 
         // 4. Update.
         let b = &mut self.bodies;
@@ -224,7 +299,7 @@ impl World {
                 b.angular_velocity[i] = w1;
             }
         }
-        self.time = t1;
+        self.time += h;
         self.step_index += 1;
         times.other += lap.lap();
         times.total = times.detection + times.nlgs + times.other;

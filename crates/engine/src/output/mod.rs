@@ -1,5 +1,8 @@
 //! Run outputs: accumulated statistics, `summary.json` and `series.csv`.
 
+pub mod checkpoint;
+
+pub mod vtk;
 use crate::digest::state_digest;
 use crate::timing::PhaseTimes;
 use crate::world::{StepReport, World};
@@ -81,7 +84,11 @@ impl Summary {
             time: world.time,
             bodies: world.bodies.len(),
             threads,
-            subdomains: "1x1x1".into(),
+            subdomains: world
+                .settings
+                .ddm
+                .as_ref()
+                .map_or("1x1x1".into(), |d| d.label()),
             timings_s: world.timers,
             contacts: ContactSummary {
                 mean: RunStats::mean(stats.contacts_sum, stats.steps),

@@ -19,6 +19,13 @@
 //! fraction = 0.2
 //! slop = 1e-5          # m
 //!
+//! [ddm]               # domain decomposition (Algorithm 1); absent = monolithic NLGS
+//! subdomains = [1, 7, 1]
+//! inner_sweeps = 1     # n
+//! interface_sweeps = 1 # m
+//! balance = "contacts" # or "volume" (the paper's uniform boxes)
+//! parallel_interface = true
+//!
 //! [materials]
 //! stone = 2700         # density, kg/m³
 //!
@@ -58,7 +65,7 @@ use crate::bodies::{BodyKind, BodySet, Driver};
 use crate::laws::FrictionTable;
 use crate::math::{DQuat, DVec3};
 use crate::shapes::ConvexPolyhedron;
-use crate::solver::{CorrectionSettings, SolverSettings};
+use crate::solver::{CorrectionSettings, DdmSettings, SolverSettings};
 use crate::world::{StepSettings, World};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -200,6 +207,9 @@ pub struct Scenario {
     pub solver: SolverSettings,
     #[serde(default)]
     pub correction: CorrectionSettings,
+    /// Domain decomposition; absent = monolithic NLGS.
+    #[serde(default)]
+    pub ddm: Option<DdmSettings>,
     #[serde(default)]
     pub materials: BTreeMap<String, f64>,
     pub friction: Friction,
@@ -270,6 +280,9 @@ impl Scenario {
         }
         self.solver.validate().map_err(ScenarioError)?;
         self.correction.validate().map_err(ScenarioError)?;
+        if let Some(d) = &self.ddm {
+            d.validate().map_err(ScenarioError)?;
+        }
         for (name, rho) in &self.materials {
             if !(rho.is_finite() && *rho > 0.0) {
                 return err(format!(
@@ -515,6 +528,7 @@ impl Scenario {
             alert: s.alert,
             solver: self.solver.clone(),
             correction: self.correction.clone(),
+            ddm: self.ddm.clone(),
             ..StepSettings::default()
         };
         Ok(World::new(bodies, friction, settings))

@@ -46,6 +46,7 @@ pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenari
             ..Default::default()
         },
         correction: Default::default(),
+        ddm: None,
         materials: BTreeMap::from([("stone".to_string(), 2700.0)]),
         friction: Friction {
             default: 1.0,

@@ -82,11 +82,11 @@ pub fn pseudo_velocities(
     for _ in 0..settings.sweeps {
         for (&(k, target), pk) in active.iter().zip(p.iter_mut()) {
             let c = &locals[k];
-            let un = c.velocity(pseudo).x;
+            let un = c.velocity(pseudo.as_slice()).x;
             let new = (*pk + (target - un) / c.w.x_axis.x).max(0.0);
             let dp = new - *pk;
             if dp != 0.0 {
-                c.apply(pseudo, DVec3::new(dp, 0.0, 0.0));
+                c.apply(pseudo.as_mut_slice(), DVec3::new(dp, 0.0, 0.0));
                 *pk = new;
             }
         }

@@ -26,6 +26,9 @@ pub struct SolverBody {
 pub struct LocalProblem {
     pub body1: u32,
     pub body2: u32,
+    /// Whether each body is dynamic (non-dynamic bodies are never written).
+    pub dynamic1: bool,
+    pub dynamic2: bool,
     /// Local frame `e = [n, t, s]`.
     pub frame: [DVec3; 3],
     /// Lever arms from each body's centre of mass to the contact point.
@@ -41,11 +44,33 @@ pub struct LocalProblem {
     pub r: DVec3,
 }
 
+/// Access to the solver bodies a sweep works on: the whole array (monolithic NLGS), or the
+/// disjoint slices a subdomain or an interface group owns (domain decomposition).
+///
+/// Kinematic and fixed bodies are never written: their velocities are imposed.
+pub trait BodyAccess {
+    /// Body `i` (global solver numbering).
+    fn body(&self, i: u32) -> &SolverBody;
+    /// Body `i`, mutably; only called for dynamic bodies.
+    fn body_mut(&mut self, i: u32) -> &mut SolverBody;
+}
+
+impl BodyAccess for [SolverBody] {
+    #[inline(always)]
+    fn body(&self, i: u32) -> &SolverBody {
+        &self[i as usize]
+    }
+    #[inline(always)]
+    fn body_mut(&mut self, i: u32) -> &mut SolverBody {
+        &mut self[i as usize]
+    }
+}
+
 impl LocalProblem {
     /// Local relative velocity `u = H_αᵀ V = Eᵀ[(v₂ + ω₂ × r₂) − (v₁ + ω₁ × r₁)]`.
     #[inline(always)]
-    pub fn velocity(&self, b: &[SolverBody]) -> DVec3 {
-        let (b1, b2) = (&b[self.body1 as usize], &b[self.body2 as usize]);
+    pub fn velocity<B: BodyAccess + ?Sized>(&self, b: &B) -> DVec3 {
+        let (b1, b2) = (b.body(self.body1), b.body(self.body2));
         let d = (b2.v + b2.w.cross(self.r2)) - (b1.v + b1.w.cross(self.r1));
         DVec3::new(
             self.frame[0].dot(d),
@@ -55,16 +80,20 @@ impl LocalProblem {
     }
 
     /// Applies the impulse increment `dr` (local frame): `V += M⁻¹ H_α dr`, i.e. `+P` on body 2
-    /// and `−P` on body 1 with `P = E dr`.
+    /// and `−P` on body 1 with `P = E dr`. Non-dynamic bodies are left alone.
     #[inline(always)]
-    pub fn apply(&self, b: &mut [SolverBody], dr: DVec3) {
+    pub fn apply<B: BodyAccess + ?Sized>(&self, b: &mut B, dr: DVec3) {
         let p = self.frame[0] * dr.x + self.frame[1] * dr.y + self.frame[2] * dr.z;
-        let b1 = &mut b[self.body1 as usize];
-        b1.v -= p * b1.inv_mass;
-        b1.w -= b1.inv_inertia * self.r1.cross(p);
-        let b2 = &mut b[self.body2 as usize];
-        b2.v += p * b2.inv_mass;
-        b2.w += b2.inv_inertia * self.r2.cross(p);
+        if self.dynamic1 {
+            let b1 = b.body_mut(self.body1);
+            b1.v -= p * b1.inv_mass;
+            b1.w -= b1.inv_inertia * self.r1.cross(p);
+        }
+        if self.dynamic2 {
+            let b2 = b.body_mut(self.body2);
+            b2.v += p * b2.inv_mass;
+            b2.w += b2.inv_inertia * self.r2.cross(p);
+        }
     }
 }
 
@@ -105,6 +134,8 @@ pub fn build_local_problems(
             LocalProblem {
                 body1: b1 as u32,
                 body2: b2 as u32,
+                dynamic1: solver_bodies[b1].inv_mass > 0.0,
+                dynamic2: solver_bodies[b2].inv_mass > 0.0,
                 frame: e,
                 r1,
                 r2,

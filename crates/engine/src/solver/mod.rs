@@ -12,12 +12,16 @@
 //! current, so `u_α` is read from the two bodies' velocities at any time.
 
 pub mod correction;
+pub mod ddm;
 pub mod delassus;
 pub mod nlgs;
+pub mod partition;
 
 pub use correction::CorrectionSettings;
+pub use ddm::DdmSettings;
 pub use delassus::{LocalProblem, SolverBody};
 pub use nlgs::{Nlgs, SolveReport};
+pub use partition::{Balance, Partition};
 
 use serde::{Deserialize, Serialize};
 

@@ -13,7 +13,7 @@
 //! 3. Every `check_every` sweeps, evaluate the chosen norm; stop when it is below `tolerance`.
 //! 4. Report iterations, the final Quad norm and natural-map residual, and convergence.
 
-use super::delassus::{LocalProblem, SolverBody};
+use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::{ConvergenceNorm, SolverSettings};
 use crate::laws::coulomb::{natural_map_residual, solve_local};
 use crate::laws::ContactStatus;
@@ -42,12 +42,19 @@ pub struct Nlgs {
 }
 
 /// Sums carried through a sweep.
-#[derive(Clone, Copy, Default, Debug)]
+#[derive(Clone, Copy, Default, Debug, PartialEq)]
 pub struct SweepSums {
     /// `Σ ‖W Δr‖²`.
     pub dwr2: f64,
     /// `Σ ‖W r‖²`.
     pub wr2: f64,
+}
+
+impl std::ops::AddAssign for SweepSums {
+    fn add_assign(&mut self, o: Self) {
+        self.dwr2 += o.dwr2;
+        self.wr2 += o.wr2;
+    }
 }
 
 impl SweepSums {
@@ -64,10 +71,10 @@ impl SweepSums {
 impl Nlgs {
     /// Updates contact α (step 2 of the algorithm) and returns its status.
     #[inline(always)]
-    pub fn update_contact(
+    pub fn update_contact<B: BodyAccess + ?Sized>(
         &self,
         c: &mut LocalProblem,
-        v: &mut [SolverBody],
+        v: &mut B,
         sums: &mut SweepSums,
     ) -> ContactStatus {
         let u = c.velocity(v);
@@ -95,7 +102,7 @@ impl Nlgs {
 
     /// Natural-map residual contribution `‖·‖²` of contact α at the current state.
     #[inline]
-    pub fn residual2(&self, c: &LocalProblem, v: &[SolverBody]) -> f64 {
+    pub fn residual2<B: BodyAccess + ?Sized>(&self, c: &LocalProblem, v: &B) -> f64 {
         let u = c.velocity(v);
         let uf = u - c.w * c.r;
         if c.gap + self.h_theta * uf.x > 0.0 {
@@ -105,6 +112,39 @@ impl Nlgs {
             let rho = 1.0 / c.w.x_axis.x;
             (natural_map_residual(c.r, u * rho, c.mu) / rho).powi(2)
         }
+    }
+
+    /// `Σ ‖H_αᵀ V‖²` over `locals`: on `V_free`, the squared scale of the residual.
+    pub fn free_scale2<B: BodyAccess + ?Sized>(&self, locals: &[LocalProblem], v: &B) -> f64 {
+        locals.iter().map(|c| c.velocity(v).length_squared()).sum()
+    }
+
+    /// Applies the warm-start impulses, in order: `V += M⁻¹ H r⁰`.
+    pub fn warm_start<B: BodyAccess + ?Sized>(&self, locals: &[LocalProblem], v: &mut B) {
+        for c in locals {
+            if c.r != DVec3::ZERO {
+                c.apply(v, c.r);
+            }
+        }
+    }
+
+    /// One Gauss-Seidel sweep over `locals` in order (step 2 of the algorithm).
+    pub fn sweep<B: BodyAccess + ?Sized>(
+        &self,
+        locals: &mut [LocalProblem],
+        v: &mut B,
+        status: &mut [ContactStatus],
+    ) -> SweepSums {
+        let mut sums = SweepSums::default();
+        for (c, st) in locals.iter_mut().zip(status.iter_mut()) {
+            *st = self.update_contact(c, v, &mut sums);
+        }
+        sums
+    }
+
+    /// `Σ_α ‖residual_α‖²` over `locals` (see [`ConvergenceNorm::NaturalMap`]).
+    pub fn residual_sum<B: BodyAccess + ?Sized>(&self, locals: &[LocalProblem], v: &B) -> f64 {
+        locals.iter().map(|c| self.residual2(c, v)).sum()
     }
 
     /// Solves the problem with all contacts in their stored order. `v` holds `V_free` on entry
@@ -117,14 +157,9 @@ impl Nlgs {
         status: &mut [ContactStatus],
     ) -> SolveReport {
         // 1. Scale of the residual: free local velocities.
-        let q2: f64 = locals.iter().map(|c| c.velocity(v).length_squared()).sum();
+        let q2 = self.free_scale2(locals, v);
         let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
-        // Warm start.
-        for c in locals.iter() {
-            if c.r != DVec3::ZERO {
-                c.apply(v, c.r);
-            }
-        }
+        self.warm_start(locals, v);
         let mut report = SolveReport::default();
         if locals.is_empty() {
             report.converged = true;
@@ -132,10 +167,7 @@ impl Nlgs {
         }
         let s = &self.settings;
         for k in 1..=s.max_iterations {
-            let mut sums = SweepSums::default();
-            for (c, st) in locals.iter_mut().zip(status.iter_mut()) {
-                *st = self.update_contact(c, v, &mut sums);
-            }
+            let sums = self.sweep(locals, v, status);
             report.iterations = k;
             report.quad = sums.quad();
             if k % s.check_every == 0 || k == s.max_iterations {

@@ -16,9 +16,9 @@
 //!    small tolerance, which keeps face–face manifolds stable (a face is skipped if its clipped
 //!    points do not reach the axis depth, see `choose`). A face axis gives a reference face
 //!    and an incident face on the other body; the incident polygon is clipped by the side planes
-//!    of the reference face (Sutherland–Hodgman) and every clipped point within the alert distance
-//!    becomes a contact point. An edge axis gives one point between the closest points of the two
-//!    edges.
+//!    of the reference face (Sutherland–Hodgman); every clipped point within the alert distance,
+//!    and every other vertex of the incident body within it above the reference face, becomes a
+//!    contact point. An edge axis gives one point between the closest points of the two edges.
 //!
 //! Touching or overlapping, the largest separation over these axes is minus the penetration
 //! depth (the largest over all directions). Apart, another direction (say, for two vertices
@@ -422,9 +422,23 @@ fn face_manifold(
         }
     }
 
-    let mut points = Vec::with_capacity(len.max(1));
+    // Other vertices of `o` within alert of the reference plane and inside the reference face
+    // also bear: the far end of an edge resting on the face may lie on no face holding the
+    // deepest vertex, and the body would pivot about a single point.
+    let inside = |x: DVec3| {
+        ref_loop.iter().enumerate().all(|(i, &v)| {
+            let p = r.vertices[v as usize];
+            let q = r.vertices[ref_loop[(i + 1) % ref_loop.len()] as usize];
+            (q - p).cross(n).dot(x - p) <= 0.0
+        })
+    };
+    let extra = o.vertices.iter().enumerate().filter_map(|(i, &x)| {
+        let candidate = n.dot(x) - offset <= alert && !inc_loop.contains(&(i as u32));
+        (candidate && inside(x)).then_some(x)
+    });
+    let mut points = Vec::with_capacity(len + 4);
     let mut witness = f64::INFINITY;
-    for &x in &src[..len] {
+    for x in src[..len].iter().copied().chain(extra) {
         let gap = n.dot(x) - offset;
         if gap <= alert {
             points.push(ManifoldPoint {

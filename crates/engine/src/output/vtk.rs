@@ -1,0 +1,751 @@
+//! ParaView output: one set of VTK XML unstructured grids (`.vtu`) per output frame, gathered by
+//! `.pvd` collections that carry the physical times, so ParaView opens a whole run in one click.
+//!
+//! Layout of an output folder `dir`:
+//!
+//! ```text
+//! dir/grains.pvd    dir/vtk/grains_000000.vtu    dir/vtk/grains_000001.vtu    …
+//! dir/bodies.pvd    dir/vtk/bodies_000000.vtu    …
+//! dir/contacts.pvd  dir/vtk/contacts_000000.vtu  …
+//! ```
+//!
+//! * `grains`: the dynamic bodies. Each polyhedron is written as its faces (`VTK_POLYGON` cells,
+//!   counter-clockwise seen from outside) over its world vertices (shared by the faces of one
+//!   body, not across bodies). Cell data, repeated on every face of a body: `id` (body index,
+//!   Int32), `group` (Int32), `velocity` and `angular_velocity` (world frame, Float64 × 3).
+//! * `bodies`: the other (kinematic and fixed) bodies, written the same way with an extra cell
+//!   field `kind` (Int32: 1 kinematic, 2 fixed). A half-space is drawn as one square in its
+//!   boundary plane, centred on the projection of the centre of the scene's bounding box, of
+//!   side 1.5 × the box diagonal (1 m without polyhedra); it follows the scene from frame to
+//!   frame.
+//! * `contacts`: one `VTK_VERTEX` cell per contact point, with point data (point data, so that
+//!   ParaView's Glyph filter applies directly): `normal` (unit, from body 1 toward body 2),
+//!   `normal_force` (`r_n n / h`, N), `tangential_force` (`(r_t t + r_s s) / h`, N), both the
+//!   mean force of the last step acting on body 2, `status` (Int32: 0 no contact, 1 stick,
+//!   2 slide), `body1`, `body2` (Int32) and `gap` (Float64, m). The contacts are those of the
+//!   last step, detected at its start, so they lag the body positions by one step.
+//!
+//! Every `.vtu` also holds the field `TimeValue` (Float64), for files opened on their own.
+//!
+//! Format: `UnstructuredGrid` version 1.0, little-endian, `header_type="UInt64"`, all arrays in
+//! one raw (not base64, not compressed) `<AppendedData>` block. It is VTK's own default layout
+//! without compression: the fastest to write and the smallest uncompressed one, read by
+//! ParaView/VTK and by meshio. Connectivity and offsets are Int32 unless a file needs more.
+
+use super::write_atomic;
+use crate::bodies::BodyKind;
+use crate::laws::ContactStatus;
+use crate::math::{DMat3, DVec3};
+use crate::shapes::{ConvexPolyhedron, Shape};
+use crate::world::World;
+use std::fs::File;
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// Names of the three series, in the order of [`VtkWriter::series`].
+const SERIES: [&str; 3] = ["grains", "bodies", "contacts"];
+/// Sub-folder of the output folder holding the `.vtu` files.
+const SUBDIR: &str = "vtk";
+const VTK_VERTEX: u8 = 1;
+const VTK_POLYGON: u8 = 7;
+/// Side of a half-space's square over the scene's bounding-box diagonal.
+const PLANE_SIDE_FACTOR: f64 = 1.5;
+/// Side of a half-space's square when there is no polyhedron to size it (m).
+const PLANE_SIDE_DEFAULT: f64 = 1.0;
+/// Write buffer: large enough that the system-call count is negligible even for big frames.
+const BUFFER: usize = 1 << 20;
+
+/// One frame of a series: its physical time and its file, relative to the output folder.
+#[derive(Clone, Debug, PartialEq)]
+struct Frame {
+    time: f64,
+    file: String,
+}
+
+/// Writes ParaView frames (`.vtu`) and keeps the `.pvd` collections of an output folder up to
+/// date; see the [module documentation](self) for the files and their fields.
+#[derive(Clone, Debug)]
+pub struct VtkWriter {
+    dir: PathBuf,
+    /// Frames written so far, per series (`grains`, `bodies`, `contacts`).
+    series: [Vec<Frame>; 3],
+    /// Number of the next frame file.
+    next: usize,
+}
+
+impl VtkWriter {
+    /// A writer starting a new series in `dir`, creating `dir/vtk/` if needed. Existing `.pvd`
+    /// files are replaced at the first [`write_frame`](Self::write_frame); use
+    /// [`resume`](Self::resume) to continue them.
+    pub fn new(dir: &Path) -> io::Result<Self> {
+        std::fs::create_dir_all(dir.join(SUBDIR))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            series: Default::default(),
+            next: 0,
+        })
+    }
+
+    /// Re-opens the output folder `dir` of an interrupted run, keeping the frames of time
+    /// `≤ up_to_time` (the time of the state the run resumes from). The `.pvd` files are
+    /// rewritten at once without the later frames, whose `.vtu` files are deleted (they belong
+    /// to a history the resumed run replaces); new frames are numbered after the kept ones.
+    /// A missing `.pvd` counts as an empty series.
+    ///
+    /// # Errors
+    ///
+    /// I/O errors, and [`io::ErrorKind::InvalidData`] for a `.pvd` this writer cannot parse.
+    pub fn resume(dir: &Path, up_to_time: f64) -> io::Result<Self> {
+        let mut writer = Self::new(dir)?;
+        for (k, name) in SERIES.iter().enumerate() {
+            let mut frames = read_pvd(&writer.pvd_path(name))?;
+            let keep = frames.iter().take_while(|f| f.time <= up_to_time).count();
+            for dropped in frames.drain(keep..) {
+                // Only files this writer names, never a path leaving the folder.
+                let f = &dropped.file;
+                if f.starts_with("vtk/") && f.ends_with(".vtu") && !f.contains("..") {
+                    match std::fs::remove_file(dir.join(f)) {
+                        Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
+                        _ => {}
+                    }
+                }
+            }
+            writer.series[k] = frames;
+        }
+        // After the highest kept number, so no kept file is ever overwritten.
+        writer.next = writer
+            .series
+            .iter()
+            .flatten()
+            .map(|f| frame_number(&f.file).map_or(0, |n| n + 1))
+            .chain(writer.series.iter().map(Vec::len))
+            .max()
+            .unwrap_or(0);
+        for (k, name) in SERIES.iter().enumerate() {
+            writer.write_pvd(k, name)?;
+        }
+        Ok(writer)
+    }
+
+    /// Writes `vtk/grains_NNNNNN.vtu`, `vtk/bodies_NNNNNN.vtu` and `vtk/contacts_NNNNNN.vtu`
+    /// for the current state of `world`, then rewrites `grains.pvd`, `bodies.pvd` and
+    /// `contacts.pvd` (atomically: temporary file, then rename) listing every frame written so
+    /// far with its physical time. A frame at the same time as the previous one replaces it,
+    /// so the collection times stay strictly increasing.
+    pub fn write_frame(&mut self, world: &World) -> io::Result<()> {
+        let time = world.time;
+        let number = self.next;
+        let mut appended = false;
+        for (k, name) in SERIES.iter().enumerate() {
+            let file = match self.series[k].last() {
+                Some(last) if last.time == time => last.file.clone(),
+                _ => {
+                    appended = true;
+                    let file = format!("{SUBDIR}/{name}_{number:06}.vtu");
+                    self.series[k].push(Frame {
+                        time,
+                        file: file.clone(),
+                    });
+                    file
+                }
+            };
+            let path = self.dir.join(&file);
+            match k {
+                0 => write_bodies(&path, world, false)?,
+                1 => write_bodies(&path, world, true)?,
+                _ => write_contacts(&path, world)?,
+            }
+        }
+        if appended {
+            self.next += 1;
+        }
+        for (k, name) in SERIES.iter().enumerate() {
+            self.write_pvd(k, name)?;
+        }
+        Ok(())
+    }
+
+    fn pvd_path(&self, name: &str) -> PathBuf {
+        self.dir.join(format!("{name}.pvd"))
+    }
+
+    fn write_pvd(&self, k: usize, name: &str) -> io::Result<()> {
+        let mut text = String::from(
+            "<?xml version=\"1.0\"?>\n\
+             <VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n  \
+             <Collection>\n",
+        );
+        for f in &self.series[k] {
+            // `{:?}` prints the shortest string that parses back to the same f64.
+            text += &format!(
+                "    <DataSet timestep=\"{:?}\" group=\"\" part=\"0\" file=\"{}\"/>\n",
+                f.time, f.file
+            );
+        }
+        text += "  </Collection>\n</VTKFile>\n";
+        write_atomic(&self.pvd_path(name), text.as_bytes())
+    }
+}
+
+/// Frames listed in a `.pvd` written by [`VtkWriter`], in file order; empty if it is missing.
+fn read_pvd(path: &Path) -> io::Result<Vec<Frame>> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(e),
+    };
+    let bad = |what: &str| {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("{}: {what}", path.display()),
+        )
+    };
+    let mut frames = Vec::new();
+    for chunk in text.split("<DataSet").skip(1) {
+        let tag = &chunk[..chunk.find('>').ok_or_else(|| bad("unterminated DataSet"))?];
+        let time = attribute(tag, "timestep")
+            .and_then(|t| t.parse::<f64>().ok())
+            .ok_or_else(|| bad("DataSet without a numeric timestep"))?;
+        let file = attribute(tag, "file").ok_or_else(|| bad("DataSet without a file"))?;
+        frames.push(Frame {
+            time,
+            file: file.to_string(),
+        });
+    }
+    Ok(frames)
+}
+
+/// Value of the attribute `name="…"` in the inside of an XML tag.
+fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
+    let key = format!(" {name}=\"");
+    let start = tag.find(&key)? + key.len();
+    let len = tag[start..].find('"')?;
+    Some(&tag[start..start + len])
+}
+
+/// `N` of `vtk/<series>_N.vtu`.
+fn frame_number(file: &str) -> Option<usize> {
+    let stem = file.strip_suffix(".vtu")?;
+    stem[stem.rfind('_')? + 1..].parse().ok()
+}
+
+/// One body's surface in world coordinates.
+enum Surface<'a> {
+    Polyhedron {
+        shape: &'a ConvexPolyhedron,
+        rotation: DMat3,
+        position: DVec3,
+    },
+    /// A finite square standing for a half-space, counter-clockwise seen from outside.
+    Square([DVec3; 4]),
+}
+
+impl Surface<'_> {
+    fn num_points(&self) -> usize {
+        match self {
+            Surface::Polyhedron { shape, .. } => shape.vertices.len(),
+            Surface::Square(_) => 4,
+        }
+    }
+
+    fn num_faces(&self) -> usize {
+        match self {
+            Surface::Polyhedron { shape, .. } => shape.num_faces(),
+            Surface::Square(_) => 1,
+        }
+    }
+
+    fn num_face_vertices(&self) -> usize {
+        match self {
+            Surface::Polyhedron { shape, .. } => shape.face_vertices.len(),
+            Surface::Square(_) => 4,
+        }
+    }
+}
+
+/// Centre and diagonal of the bounding box of the polyhedra (their bounding spheres), if any.
+fn scene_box(world: &World) -> Option<(DVec3, f64)> {
+    let b = &world.bodies;
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for (shape, &p) in b.shape.iter().zip(&b.position) {
+        if let Shape::Polyhedron(poly) = shape {
+            lo = lo.min(p - DVec3::splat(poly.radius));
+            hi = hi.max(p + DVec3::splat(poly.radius));
+        }
+    }
+    (lo.x <= hi.x).then(|| ((lo + hi) * 0.5, (hi - lo).length()))
+}
+
+/// Surfaces of the dynamic bodies (`others == false`) or of the other bodies, with their index.
+fn surfaces(world: &World, others: bool) -> Vec<(usize, Surface<'_>)> {
+    let b = &world.bodies;
+    let scene = scene_box(world);
+    (0..b.len())
+        .filter(|&i| (b.kind[i] != BodyKind::Dynamic) == others)
+        .map(|i| {
+            let q = b.orientation[i];
+            let surface = match &b.shape[i] {
+                Shape::Polyhedron(shape) => Surface::Polyhedron {
+                    shape,
+                    rotation: DMat3::from_quat(q),
+                    position: b.position[i],
+                },
+                Shape::Plane { normal } => {
+                    let n = (q * *normal).normalize();
+                    let origin = b.position[i];
+                    let (centre, side) = match scene {
+                        Some((c, diagonal)) => (c, PLANE_SIDE_FACTOR * diagonal),
+                        None => (origin, PLANE_SIDE_DEFAULT),
+                    };
+                    let c = centre - n * n.dot(centre - origin);
+                    let (mut t, mut s) = n.any_orthonormal_pair();
+                    if t.cross(s).dot(n) < 0.0 {
+                        std::mem::swap(&mut t, &mut s);
+                    }
+                    let (t, s) = (t * 0.5 * side, s * 0.5 * side);
+                    Surface::Square([c - t - s, c + t - s, c + t + s, c - t + s])
+                }
+            };
+            (i, surface)
+        })
+        .collect()
+}
+
+/// Calls `f(body)` once per face of every body, in file order: per-body values as cell data.
+fn per_face(
+    parts: &[(usize, Surface)],
+    mut f: impl FnMut(usize) -> io::Result<()>,
+) -> io::Result<()> {
+    for (i, s) in parts {
+        for _ in 0..s.num_faces() {
+            f(*i)?;
+        }
+    }
+    Ok(())
+}
+
+/// Writes the grains file (`others == false`) or the other bodies' file.
+fn write_bodies(path: &Path, world: &World, others: bool) -> io::Result<()> {
+    let b = &world.bodies;
+    let parts = surfaces(world, others);
+    let parts = &parts;
+    let num_points: usize = parts.iter().map(|(_, s)| s.num_points()).sum();
+    let num_cells: usize = parts.iter().map(|(_, s)| s.num_faces()).sum();
+    let num_conn: usize = parts.iter().map(|(_, s)| s.num_face_vertices()).sum();
+    let index = IndexType::for_sizes(num_points.max(num_conn));
+
+    let mut arrays = vec![
+        Array::field_time(world.time),
+        Array::new(Section::Cell, "id", Type::I32, 1, num_cells, move |o| {
+            per_face(parts, |i| o.i32(i as i32))
+        }),
+        Array::new(Section::Cell, "group", Type::I32, 1, num_cells, move |o| {
+            per_face(parts, |i| o.i32(b.group[i] as i32))
+        }),
+        Array::new(
+            Section::Cell,
+            "velocity",
+            Type::F64,
+            3,
+            num_cells,
+            move |o| per_face(parts, |i| o.vec3(b.velocity[i])),
+        ),
+        Array::new(
+            Section::Cell,
+            "angular_velocity",
+            Type::F64,
+            3,
+            num_cells,
+            move |o| per_face(parts, |i| o.vec3(b.angular_velocity[i])),
+        ),
+    ];
+    if others {
+        arrays.push(Array::new(
+            Section::Cell,
+            "kind",
+            Type::I32,
+            1,
+            num_cells,
+            move |o| {
+                per_face(parts, |i| {
+                    o.i32(match b.kind[i] {
+                        BodyKind::Dynamic => 0,
+                        BodyKind::Kinematic => 1,
+                        BodyKind::Fixed => 2,
+                    })
+                })
+            },
+        ));
+    }
+    arrays.push(Array::new(
+        Section::Points,
+        "Points",
+        Type::F64,
+        3,
+        num_points,
+        move |o| {
+            for (_, s) in parts {
+                match s {
+                    Surface::Polyhedron {
+                        shape,
+                        rotation,
+                        position,
+                    } => {
+                        for &v in &shape.vertices {
+                            o.vec3(*position + *rotation * v)?;
+                        }
+                    }
+                    Surface::Square(corners) => {
+                        for &c in corners {
+                            o.vec3(c)?;
+                        }
+                    }
+                }
+            }
+            Ok(())
+        },
+    ));
+    arrays.push(Array::new(
+        Section::Cells,
+        "connectivity",
+        index.ty(),
+        1,
+        num_conn,
+        move |o| {
+            let mut base = 0;
+            for (_, s) in parts {
+                match s {
+                    Surface::Polyhedron { shape, .. } => {
+                        for &v in &shape.face_vertices {
+                            o.index(index, base + v as usize)?;
+                        }
+                    }
+                    Surface::Square(_) => {
+                        for v in 0..4 {
+                            o.index(index, base + v)?;
+                        }
+                    }
+                }
+                base += s.num_points();
+            }
+            Ok(())
+        },
+    ));
+    arrays.push(Array::new(
+        Section::Cells,
+        "offsets",
+        index.ty(),
+        1,
+        num_cells,
+        move |o| {
+            let mut end = 0;
+            for (_, s) in parts {
+                match s {
+                    Surface::Polyhedron { shape, .. } => {
+                        for f in 0..shape.num_faces() {
+                            end += shape.face(f).len();
+                            o.index(index, end)?;
+                        }
+                    }
+                    Surface::Square(_) => {
+                        end += 4;
+                        o.index(index, end)?;
+                    }
+                }
+            }
+            Ok(())
+        },
+    ));
+    arrays.push(Array::cell_types(num_cells, VTK_POLYGON));
+    write_vtu(path, num_points, num_cells, &arrays)
+}
+
+/// Writes the contacts file.
+fn write_contacts(path: &Path, world: &World) -> io::Result<()> {
+    let c = &world.contacts;
+    let n = c.len();
+    let inv_h = 1.0 / world.settings.dt;
+    let index = IndexType::for_sizes(n);
+    let arrays = vec![
+        Array::field_time(world.time),
+        Array::new(Section::Point, "normal", Type::F64, 3, n, move |o| {
+            c.frame.iter().try_for_each(|f| o.vec3(f[0]))
+        }),
+        Array::new(Section::Point, "normal_force", Type::F64, 3, n, move |o| {
+            (0..n).try_for_each(|k| o.vec3(c.frame[k][0] * (c.impulse[k].x * inv_h)))
+        }),
+        Array::new(
+            Section::Point,
+            "tangential_force",
+            Type::F64,
+            3,
+            n,
+            move |o| {
+                (0..n).try_for_each(|k| {
+                    let [_, t, s] = c.frame[k];
+                    let r = c.impulse[k];
+                    o.vec3((t * r.y + s * r.z) * inv_h)
+                })
+            },
+        ),
+        Array::new(Section::Point, "status", Type::I32, 1, n, move |o| {
+            c.status.iter().try_for_each(|s| {
+                o.i32(match s {
+                    ContactStatus::NoContact => 0,
+                    ContactStatus::Stick => 1,
+                    ContactStatus::Slide => 2,
+                })
+            })
+        }),
+        Array::new(Section::Point, "body1", Type::I32, 1, n, move |o| {
+            c.body1.iter().try_for_each(|&b| o.i32(b as i32))
+        }),
+        Array::new(Section::Point, "body2", Type::I32, 1, n, move |o| {
+            c.body2.iter().try_for_each(|&b| o.i32(b as i32))
+        }),
+        Array::new(Section::Point, "gap", Type::F64, 1, n, move |o| {
+            c.gap.iter().try_for_each(|&g| o.f64(g))
+        }),
+        Array::new(Section::Points, "Points", Type::F64, 3, n, move |o| {
+            c.point.iter().try_for_each(|&p| o.vec3(p))
+        }),
+        Array::new(Section::Cells, "connectivity", index.ty(), 1, n, move |o| {
+            (0..n).try_for_each(|k| o.index(index, k))
+        }),
+        Array::new(Section::Cells, "offsets", index.ty(), 1, n, move |o| {
+            (1..=n).try_for_each(|k| o.index(index, k))
+        }),
+        Array::cell_types(n, VTK_VERTEX),
+    ];
+    write_vtu(path, n, n, &arrays)
+}
+
+/// VTK scalar types used here.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Type {
+    U8,
+    I32,
+    I64,
+    F64,
+}
+
+impl Type {
+    fn name(self) -> &'static str {
+        match self {
+            Type::U8 => "UInt8",
+            Type::I32 => "Int32",
+            Type::I64 => "Int64",
+            Type::F64 => "Float64",
+        }
+    }
+
+    fn size(self) -> u64 {
+        match self {
+            Type::U8 => 1,
+            Type::I32 => 4,
+            Type::F64 | Type::I64 => 8,
+        }
+    }
+}
+
+/// Integer type of connectivity and offsets: Int32 while every value fits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum IndexType {
+    I32,
+    I64,
+}
+
+impl IndexType {
+    fn for_sizes(largest: usize) -> Self {
+        if largest <= i32::MAX as usize {
+            IndexType::I32
+        } else {
+            IndexType::I64
+        }
+    }
+
+    fn ty(self) -> Type {
+        match self {
+            IndexType::I32 => Type::I32,
+            IndexType::I64 => Type::I64,
+        }
+    }
+}
+
+/// Where an array goes in the XML.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Section {
+    Field,
+    Point,
+    Cell,
+    Points,
+    Cells,
+}
+
+/// Fills an array's bytes into the file.
+type Fill<'a> = Box<dyn Fn(&mut Sink) -> io::Result<()> + 'a>;
+
+/// One data array: where it goes, its layout, and how to produce its bytes.
+struct Array<'a> {
+    section: Section,
+    name: &'static str,
+    ty: Type,
+    components: usize,
+    tuples: usize,
+    fill: Fill<'a>,
+}
+
+impl<'a> Array<'a> {
+    fn new(
+        section: Section,
+        name: &'static str,
+        ty: Type,
+        components: usize,
+        tuples: usize,
+        fill: impl Fn(&mut Sink) -> io::Result<()> + 'a,
+    ) -> Self {
+        Self {
+            section,
+            name,
+            ty,
+            components,
+            tuples,
+            fill: Box::new(fill),
+        }
+    }
+
+    /// The `TimeValue` field ParaView reads from a single file.
+    fn field_time(time: f64) -> Self {
+        Self::new(Section::Field, "TimeValue", Type::F64, 1, 1, move |o| {
+            o.f64(time)
+        })
+    }
+
+    /// `count` cells of one VTK type.
+    fn cell_types(count: usize, cell_type: u8) -> Self {
+        Self::new(Section::Cells, "types", Type::U8, 1, count, move |o| {
+            let chunk = [cell_type; 4096];
+            let mut left = count;
+            while left > 0 {
+                let k = left.min(chunk.len());
+                o.bytes(&chunk[..k])?;
+                left -= k;
+            }
+            Ok(())
+        })
+    }
+
+    fn num_bytes(&self) -> u64 {
+        (self.tuples * self.components) as u64 * self.ty.size()
+    }
+}
+
+/// Buffered little-endian output that counts the bytes written.
+struct Sink {
+    out: BufWriter<File>,
+    written: u64,
+}
+
+impl Sink {
+    #[inline]
+    fn bytes(&mut self, b: &[u8]) -> io::Result<()> {
+        self.written += b.len() as u64;
+        self.out.write_all(b)
+    }
+
+    #[inline]
+    fn f64(&mut self, x: f64) -> io::Result<()> {
+        self.bytes(&x.to_le_bytes())
+    }
+
+    #[inline]
+    fn i32(&mut self, x: i32) -> io::Result<()> {
+        self.bytes(&x.to_le_bytes())
+    }
+
+    #[inline]
+    fn vec3(&mut self, v: DVec3) -> io::Result<()> {
+        let mut b = [0u8; 24];
+        b[..8].copy_from_slice(&v.x.to_le_bytes());
+        b[8..16].copy_from_slice(&v.y.to_le_bytes());
+        b[16..].copy_from_slice(&v.z.to_le_bytes());
+        self.bytes(&b)
+    }
+
+    #[inline]
+    fn index(&mut self, ty: IndexType, x: usize) -> io::Result<()> {
+        match ty {
+            IndexType::I32 => self.i32(x as i32),
+            IndexType::I64 => self.bytes(&(x as i64).to_le_bytes()),
+        }
+    }
+}
+
+/// Writes an `UnstructuredGrid` with every array in one raw appended block: the XML header
+/// (offsets are known from the sizes), then per array its byte count (UInt64) and its bytes.
+fn write_vtu(path: &Path, num_points: usize, num_cells: usize, arrays: &[Array]) -> io::Result<()> {
+    let mut offsets = Vec::with_capacity(arrays.len());
+    let mut offset = 0u64;
+    for a in arrays {
+        offsets.push(offset);
+        offset += 8 + a.num_bytes();
+    }
+    let tag = |a: &Array, offset: u64| {
+        let components = if a.section == Section::Field {
+            " NumberOfTuples=\"1\"".to_string()
+        } else if a.components > 1 {
+            format!(" NumberOfComponents=\"{}\"", a.components)
+        } else {
+            String::new()
+        };
+        format!(
+            "<DataArray type=\"{}\" Name=\"{}\"{components} format=\"appended\" offset=\"{offset}\"/>\n",
+            a.ty.name(),
+            a.name
+        )
+    };
+    let section = |s: Section, open: &str, close: &str, indent: &str| {
+        let mut x = format!("{indent}{open}\n");
+        for (a, &o) in arrays.iter().zip(&offsets) {
+            if a.section == s {
+                x += &format!("{indent}  {}", tag(a, o));
+            }
+        }
+        x + indent + close + "\n"
+    };
+    let mut xml = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" \
+         byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n",
+    );
+    xml += &section(Section::Field, "<FieldData>", "</FieldData>", "    ");
+    xml += &format!("    <Piece NumberOfPoints=\"{num_points}\" NumberOfCells=\"{num_cells}\">\n");
+    xml += &section(Section::Point, "<PointData>", "</PointData>", "      ");
+    xml += &section(Section::Cell, "<CellData>", "</CellData>", "      ");
+    xml += &section(Section::Points, "<Points>", "</Points>", "      ");
+    xml += &section(Section::Cells, "<Cells>", "</Cells>", "      ");
+    xml += "    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _";
+
+    let mut sink = Sink {
+        out: BufWriter::with_capacity(BUFFER, File::create(path)?),
+        written: 0,
+    };
+    sink.bytes(xml.as_bytes())?;
+    for a in arrays {
+        let expected = a.num_bytes();
+        sink.bytes(&expected.to_le_bytes())?;
+        let start = sink.written;
+        (a.fill)(&mut sink)?;
+        // A size mismatch would shift every later offset: fail rather than write garbage.
+        if sink.written - start != expected {
+            return Err(io::Error::other(format!(
+                "{}: array {} has {} bytes, {expected} declared",
+                path.display(),
+                a.name,
+                sink.written - start
+            )));
+        }
+    }
+    sink.bytes(b"\n  </AppendedData>\n</VTKFile>\n")?;
+    sink.out.flush()
+}

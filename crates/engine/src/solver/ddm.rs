@@ -1,0 +1,508 @@
+//! Domain-decomposed NLGS: the paper's Algorithm 1 (DDM–OpenMP–NLGS), on rayon.
+//!
+//! With the primal partition ([`super::partition`]) the contacts split into subdomain contacts
+//! (both bodies in subdomain E, or one of them static) and interface contacts Γ (two dynamic
+//! bodies of different subdomains). Subdomains share no body (`W_EE' = 0`, eq. 11), so:
+//!
+//! 1. free velocities and warm start per subdomain, in parallel;
+//! 2. for j = 1 … n_DDM (`solver.max_iterations`):
+//!    1. `n` NLGS sweeps on every subdomain, in parallel (each owns a disjoint slice of bodies);
+//!    2. `m` NLGS sweeps on Γ;
+//!    3. error of each (the Quad sums of their last sweep, added in a fixed order) and the
+//!       convergence test;
+//! 3. velocities back to the bodies (the update is done by the caller).
+//!
+//! Beyond the paper, Γ is solved in parallel too: its contacts are grouped by the pair of
+//! subdomains they join, the subdomain-adjacency edges are coloured greedily (in a fixed order)
+//! so that the groups of one colour touch disjoint subdomains, and each colour's groups run
+//! concurrently. Everything depends on the partition only: the same partition gives
+//! bit-identical results for any number of threads. With `n = m = 1` the iterate is exactly
+//! monolithic NLGS run in [`DdmProblem::equivalent_order`].
+
+use super::delassus::{BodyAccess, LocalProblem, SolverBody};
+use super::nlgs::{Nlgs, SolveReport, SweepSums};
+use super::partition::{Balance, Partition, STATIC};
+use super::ConvergenceNorm;
+use crate::laws::ContactStatus;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Domain-decomposition settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DdmSettings {
+    /// Boxes `[nx, ny, nz]`.
+    pub subdomains: [usize; 3],
+    /// `n`: NLGS sweeps per subdomain per DDM iteration.
+    pub inner_sweeps: usize,
+    /// `m`: NLGS sweeps on the interface per DDM iteration.
+    pub interface_sweeps: usize,
+    /// How boxes are placed.
+    pub balance: Balance,
+    /// Solve the interface in parallel (coloured groups) rather than sequentially.
+    pub parallel_interface: bool,
+}
+
+impl Default for DdmSettings {
+    fn default() -> Self {
+        Self {
+            subdomains: [1, 1, 1],
+            inner_sweeps: 1,
+            interface_sweeps: 1,
+            balance: Balance::Contacts,
+            parallel_interface: true,
+        }
+    }
+}
+
+impl DdmSettings {
+    /// Checks every field; the error names it.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.subdomains.iter().any(|&n| n == 0 || n > 4096) {
+            return Err(format!(
+                "ddm.subdomains = {:?}: each must be in 1..=4096",
+                self.subdomains
+            ));
+        }
+        if self.inner_sweeps == 0 {
+            return Err("ddm.inner_sweeps = 0 must be ≥ 1".into());
+        }
+        if self.interface_sweeps == 0 {
+            return Err("ddm.interface_sweeps = 0 must be ≥ 1".into());
+        }
+        Ok(())
+    }
+
+    /// `"NXxNYxNZ"`.
+    pub fn label(&self) -> String {
+        let [x, y, z] = self.subdomains;
+        format!("{x}x{y}x{z}")
+    }
+}
+
+/// Seconds spent in the subdomain and interface phases of one solve.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DdmTimes {
+    pub subdomains: f64,
+    pub interface: f64,
+}
+
+/// Interface contacts joining one pair of subdomains.
+#[derive(Clone, Debug)]
+pub struct InterfaceGroup {
+    /// The two subdomains, `a < b`.
+    pub pair: (u32, u32),
+    /// Colour: groups of one colour touch disjoint subdomains.
+    pub colour: usize,
+    pub locals: Vec<LocalProblem>,
+    /// Index of each contact in the caller's order.
+    pub origin: Vec<u32>,
+    pub status: Vec<ContactStatus>,
+}
+
+/// The contacts bucketed by subdomain and interface group, bodies in solver numbering.
+#[derive(Clone, Debug)]
+pub struct DdmProblem {
+    pub sub: Vec<Vec<LocalProblem>>,
+    pub sub_origin: Vec<Vec<u32>>,
+    pub sub_status: Vec<Vec<ContactStatus>>,
+    /// Sorted by `(colour, pair)`; a single group with pair `(STATIC, STATIC)` when the
+    /// interface is solved sequentially.
+    pub groups: Vec<InterfaceGroup>,
+    pub colours: usize,
+}
+
+impl DdmProblem {
+    /// Buckets `locals` (bodies in the original numbering) by the partition.
+    pub fn build(partition: &Partition, locals: &[LocalProblem], parallel_interface: bool) -> Self {
+        let k = partition.count();
+        let mut sub = vec![Vec::new(); k];
+        let mut sub_origin = vec![Vec::new(); k];
+        let mut gamma: Vec<((u32, u32), u32, LocalProblem)> = Vec::new();
+        for (idx, c) in locals.iter().enumerate() {
+            let (s1, s2) = (
+                partition.subdomain[c.body1 as usize],
+                partition.subdomain[c.body2 as usize],
+            );
+            let mut l = *c;
+            l.body1 = partition.new_index[c.body1 as usize];
+            l.body2 = partition.new_index[c.body2 as usize];
+            let owner = match (s1, s2) {
+                (a, b) if a == b => Some(a),
+                (STATIC, b) => Some(b),
+                (a, STATIC) => Some(a),
+                _ => None,
+            };
+            match owner {
+                Some(e) if e != STATIC => {
+                    sub[e as usize].push(l);
+                    sub_origin[e as usize].push(idx as u32);
+                }
+                // Two static bodies never make a contact (detection skips them); keep it in Γ.
+                _ => {
+                    let pair = if parallel_interface {
+                        (s1.min(s2), s1.max(s2))
+                    } else {
+                        (STATIC, STATIC)
+                    };
+                    gamma.push((pair, idx as u32, l));
+                }
+            }
+        }
+        // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily.
+        gamma.sort_by_key(|(pair, idx, _)| (*pair, *idx));
+        let mut groups: Vec<InterfaceGroup> = Vec::new();
+        for (pair, idx, l) in gamma {
+            if groups.last().is_none_or(|g| g.pair != pair) {
+                groups.push(InterfaceGroup {
+                    pair,
+                    colour: 0,
+                    locals: Vec::new(),
+                    origin: Vec::new(),
+                    status: Vec::new(),
+                });
+            }
+            let g = groups.last_mut().expect("pushed above");
+            g.locals.push(l);
+            g.origin.push(idx);
+            g.status.push(ContactStatus::NoContact);
+        }
+        let mut used: Vec<Vec<usize>> = vec![Vec::new(); k];
+        let mut colours = 0;
+        for g in groups.iter_mut() {
+            if g.pair.0 == STATIC {
+                g.colour = 0;
+                colours = 1;
+                continue;
+            }
+            let (a, b) = (g.pair.0 as usize, g.pair.1 as usize);
+            let c = (0..)
+                .find(|c| !used[a].contains(c) && !used[b].contains(c))
+                .unwrap_or(0);
+            used[a].push(c);
+            used[b].push(c);
+            g.colour = c;
+            colours = colours.max(c + 1);
+        }
+        groups.sort_by_key(|g| (g.colour, g.pair));
+        let sub_status = sub
+            .iter()
+            .map(|s| vec![ContactStatus::NoContact; s.len()])
+            .collect();
+        DdmProblem {
+            sub,
+            sub_origin,
+            sub_status,
+            groups,
+            colours,
+        }
+    }
+
+    /// Caller's contact indices in the order of the equivalent monolithic NLGS: subdomain 0's
+    /// contacts, …, subdomain k−1's, then Γ by colour and group.
+    pub fn equivalent_order(&self) -> Vec<u32> {
+        let mut out: Vec<u32> = self.sub_origin.iter().flatten().copied().collect();
+        out.extend(self.groups.iter().flat_map(|g| g.origin.iter().copied()));
+        out
+    }
+
+    /// Number of interface contacts.
+    pub fn interface_len(&self) -> usize {
+        self.groups.iter().map(|g| g.locals.len()).sum()
+    }
+}
+
+/// A subdomain's view: its own bodies (mutable) and the static bodies (read-only).
+struct SubView<'a> {
+    own: &'a mut [SolverBody],
+    start: u32,
+    statics: &'a [SolverBody],
+    static_start: u32,
+}
+
+impl BodyAccess for SubView<'_> {
+    #[inline(always)]
+    fn body(&self, i: u32) -> &SolverBody {
+        if i >= self.static_start {
+            &self.statics[(i - self.static_start) as usize]
+        } else {
+            &self.own[(i - self.start) as usize]
+        }
+    }
+    #[inline(always)]
+    fn body_mut(&mut self, i: u32) -> &mut SolverBody {
+        &mut self.own[(i - self.start) as usize]
+    }
+}
+
+/// An interface group's view: the bodies of its two subdomains.
+struct PairView<'a> {
+    a: &'a mut [SolverBody],
+    a_start: u32,
+    b: &'a mut [SolverBody],
+    b_start: u32,
+}
+
+impl BodyAccess for PairView<'_> {
+    #[inline(always)]
+    fn body(&self, i: u32) -> &SolverBody {
+        if i >= self.a_start && ((i - self.a_start) as usize) < self.a.len() {
+            &self.a[(i - self.a_start) as usize]
+        } else {
+            &self.b[(i - self.b_start) as usize]
+        }
+    }
+    #[inline(always)]
+    fn body_mut(&mut self, i: u32) -> &mut SolverBody {
+        if i >= self.a_start && ((i - self.a_start) as usize) < self.a.len() {
+            &mut self.a[(i - self.a_start) as usize]
+        } else {
+            &mut self.b[(i - self.b_start) as usize]
+        }
+    }
+}
+
+/// Splits the solver bodies into one mutable slice per subdomain and the static bodies.
+fn split<'a>(
+    pb: &'a mut [SolverBody],
+    starts: &[usize],
+) -> (Vec<&'a mut [SolverBody]>, &'a [SolverBody]) {
+    let k = starts.len() - 1;
+    let mut out = Vec::with_capacity(k);
+    let mut rest = pb;
+    for e in 0..k {
+        let (a, b) = rest.split_at_mut(starts[e + 1] - starts[e]);
+        out.push(a);
+        rest = b;
+    }
+    (out, rest)
+}
+
+/// Runs `f` on every subdomain in parallel with its view; results in subdomain order.
+fn for_subdomains<T: Send>(
+    p: &mut DdmProblem,
+    pb: &mut [SolverBody],
+    starts: &[usize],
+    f: impl Fn(&mut Vec<LocalProblem>, &mut Vec<ContactStatus>, &mut SubView) -> T + Sync,
+) -> Vec<T> {
+    let k = starts.len() - 1;
+    let static_start = starts[k] as u32;
+    let (slices, statics) = split(pb, starts);
+    p.sub
+        .par_iter_mut()
+        .zip(p.sub_status.par_iter_mut())
+        .zip(slices.into_par_iter())
+        .enumerate()
+        .map(|(e, ((locals, status), own))| {
+            let mut view = SubView {
+                own,
+                start: starts[e] as u32,
+                statics,
+                static_start,
+            };
+            f(locals, status, &mut view)
+        })
+        .collect()
+}
+
+/// Runs `f` on every interface group, colour after colour, the groups of a colour in parallel;
+/// results in group order.
+fn for_interface<T: Send>(
+    p: &mut DdmProblem,
+    pb: &mut [SolverBody],
+    starts: &[usize],
+    f: impl Fn(&mut InterfaceGroup, &mut dyn BodyAccessDyn) -> T + Sync,
+) -> Vec<T> {
+    let mut out = Vec::with_capacity(p.groups.len());
+    for colour in 0..p.colours {
+        let sequential = p
+            .groups
+            .iter()
+            .any(|g| g.colour == colour && g.pair.0 == STATIC);
+        if sequential {
+            for g in p.groups.iter_mut().filter(|g| g.colour == colour) {
+                out.push(f(g, &mut FullView(pb)));
+            }
+            continue;
+        }
+        let (slices, _) = split(pb, starts);
+        let mut slots: Vec<Option<&mut [SolverBody]>> = slices.into_iter().map(Some).collect();
+        let mut tasks = Vec::new();
+        for g in p.groups.iter_mut().filter(|g| g.colour == colour) {
+            let (a, b) = (g.pair.0 as usize, g.pair.1 as usize);
+            let (sa, sb) = (slots[a].take(), slots[b].take());
+            if let (Some(sa), Some(sb)) = (sa, sb) {
+                let view = PairView {
+                    a: sa,
+                    a_start: starts[a] as u32,
+                    b: sb,
+                    b_start: starts[b] as u32,
+                };
+                tasks.push((g, view));
+            }
+        }
+        let results: Vec<T> = tasks
+            .into_par_iter()
+            .map(|(g, mut view)| f(g, &mut view))
+            .collect();
+        out.extend(results);
+    }
+    out
+}
+
+/// Object-safe body access for the interface closure.
+trait BodyAccessDyn {
+    fn body_dyn(&self, i: u32) -> &SolverBody;
+    fn body_mut_dyn(&mut self, i: u32) -> &mut SolverBody;
+}
+
+impl<T: BodyAccess> BodyAccessDyn for T {
+    fn body_dyn(&self, i: u32) -> &SolverBody {
+        self.body(i)
+    }
+    fn body_mut_dyn(&mut self, i: u32) -> &mut SolverBody {
+        self.body_mut(i)
+    }
+}
+
+impl BodyAccess for dyn BodyAccessDyn + '_ {
+    #[inline(always)]
+    fn body(&self, i: u32) -> &SolverBody {
+        self.body_dyn(i)
+    }
+    #[inline(always)]
+    fn body_mut(&mut self, i: u32) -> &mut SolverBody {
+        self.body_mut_dyn(i)
+    }
+}
+
+/// The whole body array (sequential interface).
+struct FullView<'a>(&'a mut [SolverBody]);
+
+impl BodyAccess for FullView<'_> {
+    #[inline(always)]
+    fn body(&self, i: u32) -> &SolverBody {
+        &self.0[i as usize]
+    }
+    #[inline(always)]
+    fn body_mut(&mut self, i: u32) -> &mut SolverBody {
+        &mut self.0[i as usize]
+    }
+}
+
+/// Solves the step's contact problem by Algorithm 1. `locals` and `bodies` are in the
+/// caller's numbering: `bodies` holds `V_free` on entry and the end-of-step velocities on
+/// return, impulses are written back to `locals`, statuses to `status`.
+pub fn solve(
+    nlgs: &Nlgs,
+    ddm: &DdmSettings,
+    partition: &Partition,
+    locals: &mut [LocalProblem],
+    bodies: &mut [SolverBody],
+    status: &mut [ContactStatus],
+) -> (SolveReport, DdmTimes) {
+    let mut times = DdmTimes::default();
+    let mut pb: Vec<SolverBody> = partition
+        .order
+        .iter()
+        .map(|&i| bodies[i as usize])
+        .collect();
+    let mut p = DdmProblem::build(partition, locals, ddm.parallel_interface);
+    let starts = &partition.starts;
+    let mut report = SolveReport::default();
+
+    // 1. Residual scale (in the equivalent order), then warm start.
+    let mut q2 = 0.0;
+    for l in p
+        .sub
+        .iter()
+        .flatten()
+        .chain(p.groups.iter().flat_map(|g| g.locals.iter()))
+    {
+        q2 += l.velocity(pb.as_slice()).length_squared();
+    }
+    let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
+    let t = Instant::now();
+    for_subdomains(&mut p, &mut pb, starts, |l, _, v| nlgs.warm_start(l, v));
+    times.subdomains += t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    for_interface(&mut p, &mut pb, starts, |g, v| {
+        nlgs.warm_start(&g.locals, v)
+    });
+    times.interface += t.elapsed().as_secs_f64();
+
+    // 2. DDM iterations.
+    let s = &nlgs.settings;
+    let total_contacts = locals.len();
+    if total_contacts == 0 {
+        report.converged = true;
+    }
+    for j in 1..=s.max_iterations {
+        if total_contacts == 0 {
+            break;
+        }
+        let t = Instant::now();
+        let sub_sums = for_subdomains(&mut p, &mut pb, starts, |l, st, v| {
+            let mut sums = SweepSums::default();
+            for _ in 0..ddm.inner_sweeps {
+                sums = nlgs.sweep(l, v, st);
+            }
+            sums
+        });
+        times.subdomains += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let mut gamma_sums = vec![SweepSums::default(); p.groups.len()];
+        for _ in 0..ddm.interface_sweeps {
+            gamma_sums = for_interface(&mut p, &mut pb, starts, |g, v| {
+                nlgs.sweep(&mut g.locals, v, &mut g.status)
+            });
+        }
+        times.interface += t.elapsed().as_secs_f64();
+        let mut sums = SweepSums::default();
+        for x in sub_sums.into_iter().chain(gamma_sums) {
+            sums += x;
+        }
+        report.iterations = j;
+        report.quad = sums.quad();
+        if j % s.check_every == 0 || j == s.max_iterations {
+            let measure = match s.norm {
+                ConvergenceNorm::Quad => report.quad,
+                ConvergenceNorm::NaturalMap => residual(nlgs, &p, &pb, q),
+            };
+            if measure <= s.tolerance {
+                report.converged = true;
+                break;
+            }
+        }
+    }
+    report.residual = residual(nlgs, &p, &pb, q);
+
+    // 3. Back to the caller's numbering.
+    for (k, &i) in partition.order.iter().enumerate() {
+        bodies[i as usize] = pb[k];
+    }
+    let buckets = p
+        .sub
+        .iter()
+        .zip(&p.sub_origin)
+        .zip(&p.sub_status)
+        .map(|((l, o), s)| (l, o, s))
+        .chain(p.groups.iter().map(|g| (&g.locals, &g.origin, &g.status)));
+    for (l, o, st) in buckets {
+        for ((c, &idx), &stt) in l.iter().zip(o).zip(st) {
+            locals[idx as usize].r = c.r;
+            status[idx as usize] = stt;
+        }
+    }
+    (report, times)
+}
+
+/// Relative natural-map residual over all contacts, summed in the equivalent order.
+fn residual(nlgs: &Nlgs, p: &DdmProblem, pb: &[SolverBody], q: f64) -> f64 {
+    let mut sum = 0.0;
+    for l in p.sub.iter().chain(p.groups.iter().map(|g| &g.locals)) {
+        sum += nlgs.residual_sum(l, pb);
+    }
+    sum.sqrt() / q
+}

@@ -1,0 +1,179 @@
+//! Domain decomposition (Algorithm 1): equivalence with monolithic NLGS, independence from the
+//! number of threads, agreement at convergence.
+
+use ballast_engine::digest::state_digest;
+use ballast_engine::laws::ContactStatus;
+use ballast_engine::scenario::presets::pile;
+use ballast_engine::solver::ddm::{self, DdmProblem};
+use ballast_engine::solver::{Balance, DdmSettings, SolverSettings};
+use ballast_engine::world::World;
+
+/// A pile of 150 grains after 500 steps of pouring (many contacts, grains still moving).
+fn poured(steps: u64) -> World {
+    let mut w = pile(150, [0.025, 0.05], 11, 0).build().unwrap();
+    for _ in 0..steps {
+        w.step();
+    }
+    w
+}
+
+fn settings(dims: [usize; 3], parallel_interface: bool, balance: Balance) -> DdmSettings {
+    DdmSettings {
+        subdomains: dims,
+        inner_sweeps: 1,
+        interface_sweeps: 1,
+        balance,
+        parallel_interface,
+    }
+}
+
+/// With n = m = 1, DDM iterates are bit-identical to monolithic NLGS run in the order
+/// [subdomain 1 contacts, …, subdomain k contacts, Γ contacts].
+#[test]
+fn ddm_with_single_sweeps_equals_monolithic_in_partition_order() {
+    let mut w = poured(1500);
+    w.settings.solver = SolverSettings {
+        tolerance: 1e-300,
+        max_iterations: 25,
+        ..Default::default()
+    };
+    w.prepare();
+    let nlgs = w.nlgs();
+    let (locals, bodies) = (w.local_problems().to_vec(), w.solver_bodies().to_vec());
+    assert!(
+        locals.len() > 200,
+        "want a real problem, got {} contacts",
+        locals.len()
+    );
+    for (dims, par, bal) in [
+        ([2, 2, 1], true, Balance::Contacts),
+        ([3, 1, 2], false, Balance::Volume),
+        ([4, 4, 1], true, Balance::Volume),
+    ] {
+        let d = settings(dims, par, bal);
+        let partition = w.partition(&d);
+        let problem = DdmProblem::build(&partition, &locals, par);
+        assert!(
+            problem.interface_len() > 0,
+            "{dims:?}: no interface contact"
+        );
+        assert!(problem.sub.iter().filter(|s| !s.is_empty()).count() > 1);
+        // DDM.
+        let (mut l1, mut v1) = (locals.clone(), bodies.clone());
+        let mut s1 = vec![ContactStatus::NoContact; l1.len()];
+        let (r1, _) = ddm::solve(&nlgs, &d, &partition, &mut l1, &mut v1, &mut s1);
+        // Monolithic NLGS in the equivalent order.
+        let order = problem.equivalent_order();
+        assert_eq!(order.len(), locals.len());
+        let mut l2: Vec<_> = order.iter().map(|&i| locals[i as usize]).collect();
+        let mut v2 = bodies.clone();
+        let mut s2 = vec![ContactStatus::NoContact; l2.len()];
+        let r2 = nlgs.solve(&mut l2, &mut v2, &mut s2);
+        assert_eq!(r1.iterations, 25);
+        assert_eq!(r2.iterations, 25);
+        for (a, b) in v1.iter().zip(&v2) {
+            assert_eq!(
+                (a.v.to_array(), a.w.to_array()),
+                (b.v.to_array(), b.w.to_array()),
+                "{dims:?}"
+            );
+        }
+        for (k, &i) in order.iter().enumerate() {
+            assert_eq!(
+                l1[i as usize].r.to_array(),
+                l2[k].r.to_array(),
+                "{dims:?}: contact {i}"
+            );
+            assert_eq!(s1[i as usize], s2[k]);
+        }
+    }
+}
+
+/// The result depends on the partition only: bit-identical for 1, 2 and 4 threads.
+#[test]
+fn ddm_is_independent_of_the_thread_count() {
+    let run = |threads: usize, par: bool| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut sc = pile(120, [0.025, 0.05], 5, 0);
+            sc.ddm = Some(DdmSettings {
+                subdomains: [3, 2, 1],
+                parallel_interface: par,
+                ..Default::default()
+            });
+            let mut w = sc.build().unwrap();
+            for _ in 0..1500 {
+                w.step();
+            }
+            assert!(w.contacts.len() > 100);
+            state_digest(&w.bodies)
+        })
+    };
+    for par in [true, false] {
+        let one = run(1, par);
+        assert_eq!(
+            one,
+            run(2, par),
+            "2 threads differ (parallel interface {par})"
+        );
+        assert_eq!(
+            one,
+            run(4, par),
+            "4 threads differ (parallel interface {par})"
+        );
+    }
+}
+
+/// Converged DDM and converged monolithic NLGS agree within the tolerance on a settled pile.
+#[test]
+fn converged_ddm_agrees_with_monolithic() {
+    let mut w = poured(2500);
+    w.settings.solver = SolverSettings {
+        tolerance: 1e-9,
+        max_iterations: 20_000,
+        ..Default::default()
+    };
+    w.prepare();
+    let nlgs = w.nlgs();
+    let (locals, bodies) = (w.local_problems().to_vec(), w.solver_bodies().to_vec());
+    let (mut l2, mut v2) = (locals.clone(), bodies.clone());
+    let mut s2 = vec![ContactStatus::NoContact; l2.len()];
+    let mono = nlgs.solve(&mut l2, &mut v2, &mut s2);
+    assert!(mono.converged);
+    for (dims, n, m) in [([2, 2, 1], 1, 1), ([3, 3, 1], 3, 2)] {
+        let d = DdmSettings {
+            subdomains: dims,
+            inner_sweeps: n,
+            interface_sweeps: m,
+            ..Default::default()
+        };
+        let partition = w.partition(&d);
+        let (mut l1, mut v1) = (locals.clone(), bodies.clone());
+        let mut s1 = vec![ContactStatus::NoContact; l1.len()];
+        let (rep, _) = ddm::solve(&nlgs, &d, &partition, &mut l1, &mut v1, &mut s1);
+        assert!(rep.converged, "{dims:?}: DDM did not converge");
+        // Relative velocities at every contact agree to the tolerance scale.
+        let scale = locals
+            .iter()
+            .map(|c| c.velocity(bodies.as_slice()).length())
+            .fold(0.0, f64::max);
+        for (a, b) in l1.iter().zip(&l2) {
+            let (ua, ub) = (a.velocity(v1.as_slice()), b.velocity(v2.as_slice()));
+            assert!(
+                (ua - ub).length() <= 1e-5 * scale,
+                "{dims:?}: {ua} vs {ub} (scale {scale})"
+            );
+        }
+        let (na, nb): (f64, f64) = (
+            l1.iter().map(|c| c.r.x).sum(),
+            l2.iter().map(|c| c.r.x).sum(),
+        );
+        assert!(
+            (na - nb).abs() <= 1e-5 * nb.abs(),
+            "{dims:?}: total normal impulse {na} vs {nb}"
+        );
+    }
+}
