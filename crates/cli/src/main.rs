@@ -3,6 +3,7 @@
 mod bench;
 mod progress;
 mod run;
+mod scaling;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -34,6 +35,10 @@ enum Command {
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Domain decomposition into NXxNYxNZ subdomains (e.g. 1x7x1); overrides the
+        /// scenario's [ddm] subdomains, 1x1x1 = monolithic NLGS.
+        #[arg(long, value_parser = parse_subdomains)]
+        subdomains: Option<[usize; 3]>,
         /// No progress output.
         #[arg(long)]
         quiet: bool,
@@ -55,7 +60,31 @@ enum Command {
         /// Worker threads (default: 1, the single-thread figure the target is stated for).
         #[arg(long, default_value_t = 1)]
         threads: usize,
+        /// Thread-scaling study instead: one settled packing of the first `--grains` size,
+        /// monolithic NLGS and DDM for each `--partitions`, on 1, 2 and all threads.
+        #[arg(long)]
+        scaling: bool,
+        /// Partitions of the scaling study.
+        #[arg(long, value_delimiter = ',', value_parser = parse_subdomains, default_value = "2x1x1,2x2x1,4x4x1")]
+        partitions: Vec<[usize; 3]>,
     },
+}
+
+/// Parses `NXxNYxNZ` (each ≥ 1).
+fn parse_subdomains(s: &str) -> Result<[usize; 3], String> {
+    let parts: Vec<&str> = s.split(['x', 'X']).collect();
+    let bad = || format!("--subdomains {s}: expected NXxNYxNZ with integers ≥ 1, e.g. 1x7x1");
+    if parts.len() != 3 {
+        return Err(bad());
+    }
+    let mut out = [0usize; 3];
+    for (o, p) in out.iter_mut().zip(&parts) {
+        *o = p.trim().parse().map_err(|_| bad())?;
+        if *o == 0 {
+            return Err(bad());
+        }
+    }
+    Ok(out)
 }
 
 fn set_threads(threads: Option<usize>) -> Result<usize, String> {
@@ -79,14 +108,25 @@ fn main() -> ExitCode {
             out,
             steps,
             threads,
+            subdomains,
             quiet,
-        } => set_threads(threads).and_then(|t| run::run(&file, &out, steps, t, quiet)),
+        } => set_threads(threads).and_then(|t| run::run(&file, &out, steps, t, subdomains, quiet)),
+        Command::Bench {
+            json,
+            grains,
+            settle_steps,
+            steps,
+            scaling: true,
+            partitions,
+            ..
+        } => scaling::scaling(json.as_deref(), grains[0], settle_steps, steps, &partitions),
         Command::Bench {
             json,
             grains,
             settle_steps,
             steps,
             threads,
+            ..
         } => set_threads(Some(threads))
             .and_then(|t| bench::bench(json.as_deref(), &grains, settle_steps, steps, t)),
     };

@@ -3,6 +3,7 @@
 use crate::progress::Progress;
 use ballast_engine::output::{series_row, RunStats, Summary, SERIES_HEADER};
 use ballast_engine::scenario::Scenario;
+use ballast_engine::solver::DdmSettings;
 use std::io::Write;
 use std::path::Path;
 
@@ -12,11 +13,22 @@ pub fn run(
     out: &Path,
     steps: Option<u64>,
     threads: usize,
+    subdomains: Option<[usize; 3]>,
     quiet: bool,
 ) -> Result<(), String> {
     let text = std::fs::read_to_string(file)
         .map_err(|e| format!("cannot read scenario {}: {e}", file.display()))?;
-    let scenario = Scenario::from_toml(&text).map_err(|e| format!("{}: {e}", file.display()))?;
+    let mut scenario =
+        Scenario::from_toml(&text).map_err(|e| format!("{}: {e}", file.display()))?;
+    if let Some(dims) = subdomains {
+        scenario.ddm = match (dims, scenario.ddm.take()) {
+            ([1, 1, 1], _) => None,
+            (dims, d) => Some(DdmSettings {
+                subdomains: dims,
+                ..d.unwrap_or_default()
+            }),
+        };
+    }
     let steps = steps.unwrap_or_else(|| scenario.steps());
     let mut world = scenario
         .build()

@@ -279,7 +279,13 @@ fn split<'a>(
     (out, rest)
 }
 
-/// Runs `f` on every subdomain in parallel with its view; results in subdomain order.
+/// Below this many contacts a phase runs on the calling thread: dispatching tasks would cost
+/// more than the sweep. Subdomains (and the groups of one colour) touch disjoint bodies, so
+/// running them one after the other gives bit-identical results.
+const PARALLEL_MIN_CONTACTS: usize = 4096;
+
+/// Runs `f` on every subdomain with its view, in parallel when worth it; results in subdomain
+/// order.
 fn for_subdomains<T: Send>(
     p: &mut DdmProblem,
     pb: &mut [SolverBody],
@@ -289,6 +295,24 @@ fn for_subdomains<T: Send>(
     let k = starts.len() - 1;
     let static_start = starts[k] as u32;
     let (slices, statics) = split(pb, starts);
+    if p.sub.iter().map(Vec::len).sum::<usize>() < PARALLEL_MIN_CONTACTS {
+        return p
+            .sub
+            .iter_mut()
+            .zip(p.sub_status.iter_mut())
+            .zip(slices)
+            .enumerate()
+            .map(|(e, ((locals, status), own))| {
+                let mut view = SubView {
+                    own,
+                    start: starts[e] as u32,
+                    statics,
+                    static_start,
+                };
+                f(locals, status, &mut view)
+            })
+            .collect();
+    }
     p.sub
         .par_iter_mut()
         .zip(p.sub_status.par_iter_mut())

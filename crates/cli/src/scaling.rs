@@ -1,0 +1,195 @@
+//! `ballast bench --scaling`: thread scaling of monolithic NLGS and DDM on a settled packing
+//! (the paper's Table 1 and Fig. 4).
+//!
+//! The packing is poured and settled once (cheap solver settings), then every configuration
+//! (solver × partition × threads) restarts from the same settled state, runs a few warm-up
+//! steps (so warm start is in place) and is timed over `steps` steps. Speedup and efficiency
+//! compare a configuration with itself on one thread: results are bit-identical across thread
+//! counts, so the same work is timed.
+
+use ballast_engine::scenario::presets::pile;
+use ballast_engine::solver::ddm::DdmProblem;
+use ballast_engine::solver::{DdmSettings, SolverSettings};
+use ballast_engine::timing::PhaseTimes;
+use ballast_engine::world::World;
+use serde::Serialize;
+use std::path::Path;
+
+/// One scaling case (keys as the engine benchmark's, plus DDM fields).
+#[derive(Serialize, Debug, Clone)]
+pub struct ScalingCase {
+    pub name: String,
+    pub grains: usize,
+    pub threads: usize,
+    pub subdomains: String,
+    pub contact_points: f64,
+    pub ms_per_step: f64,
+    pub sweeps_per_step: f64,
+    pub contact_updates_per_s: f64,
+    pub speedup: f64,
+    pub efficiency: f64,
+    pub timings_s: PhaseTimes,
+    pub interface_contacts_fraction: f64,
+}
+
+/// What one timed configuration measured.
+struct Measured {
+    times: PhaseTimes,
+    contacts: f64,
+    sweeps: f64,
+    updates_per_s: f64,
+    interface_fraction: f64,
+}
+
+fn time_case(
+    settled: &World,
+    ddm: Option<DdmSettings>,
+    threads: usize,
+    warmup: u64,
+    steps: u64,
+) -> Result<Measured, String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| e.to_string())?;
+    Ok(pool.install(|| {
+        let mut settings = settled.settings.clone();
+        settings.ddm = ddm.clone();
+        let mut w = World::new(settled.bodies.clone(), settled.friction.clone(), settings);
+        for _ in 0..warmup {
+            w.step();
+        }
+        let before = w.timers;
+        let (mut contacts, mut sweeps, mut updates) = (0u64, 0u64, 0u64);
+        for _ in 0..steps {
+            let r = w.step();
+            contacts += r.contacts as u64;
+            sweeps += r.solve.iterations as u64;
+            updates += (r.contacts * r.solve.iterations) as u64;
+        }
+        // Interface share of the last step's contacts.
+        let interface_fraction = match &ddm {
+            Some(d) => {
+                let p = w.partition(d);
+                let n = w.local_problems().len().max(1) as f64;
+                DdmProblem::build(&p, w.local_problems(), d.parallel_interface).interface_len()
+                    as f64
+                    / n
+            }
+            None => 0.0,
+        };
+        let mut t = w.timers;
+        t.detection -= before.detection;
+        t.nlgs -= before.nlgs;
+        t.subdomains -= before.subdomains;
+        t.interface -= before.interface;
+        t.other -= before.other;
+        t.total -= before.total;
+        let n = steps as f64;
+        Measured {
+            times: t,
+            contacts: contacts as f64 / n,
+            sweeps: sweeps as f64 / n,
+            updates_per_s: updates as f64 / t.nlgs.max(1e-12),
+            interface_fraction,
+        }
+    }))
+}
+
+/// Runs the scaling study and prints the Table-1 and speedup rows.
+pub fn scaling(
+    json: Option<&Path>,
+    grains: usize,
+    settle_steps: u64,
+    steps: u64,
+    partitions: &[[usize; 3]],
+) -> Result<(), String> {
+    let all = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let mut threads = vec![1, 2, all];
+    threads.sort_unstable();
+    threads.dedup();
+    // 1. Pour and settle once, cheaply.
+    let mut scenario = pile(grains, [0.025, 0.05], 1, settle_steps);
+    scenario.solver = SolverSettings {
+        tolerance: 1e-3,
+        max_iterations: 60,
+        ..Default::default()
+    };
+    let mut settled = scenario.build().map_err(|e| e.to_string())?;
+    eprintln!("settling {grains} grains for {settle_steps} steps …");
+    for _ in 0..settle_steps {
+        settled.step();
+    }
+    // 2. Measured settings: the engine's defaults.
+    settled.settings.solver = SolverSettings::default();
+    let mut configs: Vec<Option<DdmSettings>> = vec![None];
+    configs.extend(partitions.iter().map(|&d| {
+        Some(DdmSettings {
+            subdomains: d,
+            ..Default::default()
+        })
+    }));
+    println!(
+        "{:<26} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>6}",
+        "case",
+        "threads",
+        "ms/step",
+        "detect%",
+        "nlgs%",
+        "subdom%",
+        "iface%",
+        "other%",
+        "sweeps",
+        "speedup",
+        "eff"
+    );
+    let mut cases = Vec::new();
+    for ddm in configs {
+        let label = ddm.as_ref().map_or("1x1x1".to_string(), |d| d.label());
+        let mut t1 = None;
+        for &p in &threads {
+            let m = time_case(&settled, ddm.clone(), p, 5, steps)?;
+            let t = m.times;
+            let base = *t1.get_or_insert(t.total);
+            let speedup = base / t.total;
+            let pct = |x: f64| 100.0 * x / t.total;
+            let name = format!(
+                "{}_{grains}_{label}",
+                if ddm.is_some() { "ddm" } else { "nlgs" }
+            );
+            println!(
+                "{:<26} {:>7} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>9.1} {:>7.1} {:>7.2} {:>5.0}%",
+                name,
+                p,
+                1e3 * t.total / steps as f64,
+                pct(t.detection),
+                pct(t.nlgs),
+                pct(t.subdomains),
+                pct(t.interface),
+                pct(t.other),
+                m.sweeps,
+                speedup,
+                100.0 * speedup / p as f64
+            );
+            cases.push(ScalingCase {
+                name,
+                grains,
+                threads: p,
+                subdomains: label.clone(),
+                contact_points: m.contacts,
+                ms_per_step: 1e3 * t.total / steps as f64,
+                sweeps_per_step: m.sweeps,
+                contact_updates_per_s: m.updates_per_s,
+                speedup,
+                efficiency: speedup / p as f64,
+                timings_s: t,
+                interface_contacts_fraction: m.interface_fraction,
+            });
+        }
+    }
+    if let Some(path) = json {
+        let text = serde_json::to_string_pretty(&cases).map_err(|e| e.to_string())?;
+        std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+    }
+    Ok(())
+}
