@@ -26,9 +26,12 @@ enum Command {
     Run {
         /// Scenario file.
         file: PathBuf,
-        /// Output folder (created); gets summary.json and series.csv.
-        #[arg(long, default_value = "out")]
+        /// Output folder (created): summary.json, series.csv, *.pvd + vtk/, checkpoints/.
+        #[arg(long, default_value = "out", conflicts_with = "resume")]
         out: PathBuf,
+        /// Continue the run in this folder from its newest valid checkpoint, up to --steps.
+        #[arg(long)]
+        resume: Option<PathBuf>,
         /// Stop after this many steps (overrides the scenario).
         #[arg(long)]
         steps: Option<u64>,
@@ -106,11 +109,22 @@ fn main() -> ExitCode {
         Command::Run {
             file,
             out,
+            resume,
             steps,
             threads,
             subdomains,
             quiet,
-        } => set_threads(threads).and_then(|t| run::run(&file, &out, steps, t, subdomains, quiet)),
+        } => set_threads(threads).and_then(|threads| {
+            run::run(&run::RunArgs {
+                file: &file,
+                out: resume.as_deref().unwrap_or(&out),
+                resume: resume.is_some(),
+                steps,
+                threads,
+                subdomains,
+                quiet,
+            })
+        }),
         Command::Bench {
             json,
             grains,

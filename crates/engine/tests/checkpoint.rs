@@ -52,11 +52,10 @@ fn tmp(name: &str) -> PathBuf {
     d
 }
 
-/// The reference run at step `SPLIT`: checkpoint bytes (with statistics), digest, statistics.
+/// The reference run at step `SPLIT`: checkpoint bytes (with statistics) and digest.
 struct AtSplit {
     bytes: Vec<u8>,
     digest: String,
-    stats: RunStats,
 }
 
 fn at_split() -> &'static AtSplit {
@@ -68,7 +67,6 @@ fn at_split() -> &'static AtSplit {
         AtSplit {
             bytes: encode_checkpoint(&w, Some(&stats)),
             digest: state_digest(&w.bodies),
-            stats,
         }
     })
 }
@@ -134,7 +132,10 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() {
     assert_eq!(resumed.step_index, SPLIT);
     run(&mut resumed, TOTAL - SPLIT, &mut stats);
 
-    assert_eq!(state_digest(&resumed.bodies), state_digest(&straight.bodies));
+    assert_eq!(
+        state_digest(&resumed.bodies),
+        state_digest(&straight.bodies)
+    );
     assert_eq!(resumed.step_index, straight.step_index);
     assert_eq!(resumed.time.to_bits(), straight.time.to_bits());
     assert_contacts_identical(&resumed.contacts, &straight.contacts);
@@ -159,7 +160,7 @@ fn run_folder_resume_matches_one_long_run() {
     let mut stats = RunStats::default();
     for _ in 0..SPLIT {
         stats.add(&w.step());
-        if w.step_index % 250 == 0 {
+        if w.step_index.is_multiple_of(250) {
             write_checkpoint_with_stats(&w, Some(&stats), &checkpoint_path(&dir, w.step_index))
                 .unwrap();
             prune_checkpoints(&dir, 2).unwrap();
@@ -185,7 +186,10 @@ fn run_folder_resume_matches_one_long_run() {
     let mut straight = build(&s);
     let mut straight_stats = RunStats::default();
     run(&mut straight, TOTAL, &mut straight_stats);
-    assert_eq!(state_digest(&resumed.bodies), state_digest(&straight.bodies));
+    assert_eq!(
+        state_digest(&resumed.bodies),
+        state_digest(&straight.bodies)
+    );
     assert_eq!(format!("{stats:?}"), format!("{straight_stats:?}"));
 }
 
@@ -286,7 +290,10 @@ fn damaged_files_give_clear_errors() {
             _ => panic!("{name}: {e:?}"),
         }
         let msg = e.to_string();
-        assert!(msg.contains("truncated") && msg.contains("older checkpoint"), "{msg}");
+        assert!(
+            msg.contains("truncated") && msg.contains("older checkpoint"),
+            "{msg}"
+        );
     }
 
     // One altered byte in the payload, in the checksum, in the version field.
@@ -344,32 +351,36 @@ fn damaged_files_give_clear_errors() {
         "{msg}"
     );
 
-    // Intact frame, nonsense payload (a writer bug): malformed, not a panic.
-    let mut b = good.clone();
-    let last = n - 9; // the statistics flag is the payload's last section; corrupt its tail
-    b[last] = 0xff;
-    b[HEADER_CONTACT_PROBE..HEADER_CONTACT_PROBE + 8].copy_from_slice(&u64::MAX.to_le_bytes());
-    reseal(&mut b);
-    let e = read_damaged(&dir, "malformed.bin", &b);
-    assert!(
-        matches!(
-            e,
+    // Intact frame around contents that do not decode (a writer bug): malformed, not a panic.
+    let malformed = |name: &str, b: &mut Vec<u8>| {
+        reseal(b);
+        let e = read_damaged(&dir, name, b);
+        match &e {
             CheckpointError::Corrupted {
                 reason: Corruption::Malformed(_),
                 ..
-            }
-        ),
-        "{e:?}"
-    );
+            } => e.to_string(),
+            _ => panic!("{name}: {e:?}"),
+        }
+    };
+    let mut b = good.clone();
+    b[FINGERPRINT_AT..FINGERPRINT_AT + 8].copy_from_slice(&u64::MAX.to_le_bytes());
+    let msg = malformed("fingerprint.bin", &mut b);
+    assert!(msg.contains("scene fingerprint"), "{msg}");
+    let mut b = good.clone();
+    b.insert(n - 8, 0);
+    let len = u64::from_le_bytes(b[15..23].try_into().unwrap()) + 1;
+    b[15..23].copy_from_slice(&len.to_le_bytes());
+    let msg = malformed("extra.bin", &mut b);
+    assert!(msg.contains("1 unread bytes"), "{msg}");
 
     let mut w = build(&scenario());
     let e = read_checkpoint(&dir.join("missing.bin"), &mut w).unwrap_err();
     assert!(matches!(e, CheckpointError::Io { .. }), "{e:?}");
 }
 
-/// Offset of the scene fingerprint (first payload field): overwriting it with garbage and
-/// re-sealing gives an intact frame around contents that do not decode.
-const HEADER_CONTACT_PROBE: usize = 23;
+/// Offset of the scene fingerprint, the first payload field (after magic, version, length).
+const FINGERPRINT_AT: usize = 23;
 
 proptest! {
     #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
@@ -385,10 +396,9 @@ proptest! {
         } else {
             b[at.index(good.len())] ^= mask;
         }
-        let path = std::env::temp_dir().join(format!(
-            "ballast_ckpt_fuzz_{}_{:?}.bin",
-            std::process::id(),
-            std::thread::current().id()
+        let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!(
+            "checkpoint_fuzz_{}.bin",
+            std::process::id()
         ));
         write_bytes(&path, &b);
         let mut w = build(&scenario());
@@ -424,7 +434,10 @@ fn other_scene_is_refused_naming_the_difference() {
 
     let what = mismatch(pile(GRAINS, DIAMETER, SEED + 1, TOTAL));
     // Bodies 0–4 are the box; body 5 is the first grain.
-    assert!(what.starts_with("body 5 (dynamic): shape differs"), "{what}");
+    assert!(
+        what.starts_with("body 5 (dynamic): shape differs"),
+        "{what}"
+    );
     assert!(what.contains("more bodies differ"), "{what}");
 
     let what = mismatch(pile(GRAINS - 10, DIAMETER, SEED, TOTAL));
@@ -440,7 +453,10 @@ fn other_scene_is_refused_naming_the_difference() {
     let mut s = scenario();
     s.simulation.dt = 1e-4;
     let what = mismatch(s);
-    assert_eq!(what, "dt is 0.0002 in the checkpoint, 0.0001 in the scenario");
+    assert_eq!(
+        what,
+        "dt is 0.0002 in the checkpoint, 0.0001 in the scenario"
+    );
 
     let mut s = scenario();
     s.solver.tolerance = 1e-6;
@@ -503,7 +519,10 @@ fn interrupted_write_falls_back_to_the_newest_valid_checkpoint() {
         (1000, "truncated"),
         (950, "truncated"),
         (800, "checksum mismatch"),
-        (720, "the file name says step 720 but the contents are at step 700"),
+        (
+            720,
+            "the file name says step 720 but the contents are at step 700",
+        ),
     ];
     assert_eq!(skipped.len(), expect.len(), "{skipped:#?}");
     for ((path, msg), (step, why)) in skipped.iter().zip(expect) {
@@ -619,6 +638,7 @@ fn checkpoints_cover_all_state_fields() {
             "previous",
             "locals",
             "solver_bodies",
+            "free_w",
             "pseudo",
         ],
         "World",

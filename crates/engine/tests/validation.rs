@@ -6,7 +6,7 @@ use ballast_engine::math::{DQuat, DVec3};
 use ballast_engine::scenario::generate::random_rotation;
 use ballast_engine::scenario::presets::pile;
 use ballast_engine::shapes::random::{random_grain, GrainParams};
-use ballast_engine::shapes::ConvexPolyhedron;
+use ballast_engine::shapes::{ConvexPolyhedron, Shape};
 use ballast_engine::solver::SolverSettings;
 use ballast_engine::world::{StepSettings, World};
 use rand::SeedableRng;
@@ -256,6 +256,55 @@ fn pour_300_grains_into_a_box() {
         assert!(
             p.x > 0.0 && p.x < side && p.y > 0.0 && p.y < side && p.z > 0.0 && p.z < 2.0,
             "grain {i} escaped: {p}"
+        );
+    }
+}
+
+/// Grains dropped on a large fixed box (a 20 m × 20 m × 1 m slab, as walls are sometimes built)
+/// land on its top face and stay there: never fall through, whatever the orientation (a build
+/// of the reference platform was seen losing grains this way).
+#[test]
+fn grains_never_fall_through_a_large_fixed_box() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+    let params = GrainParams {
+        vertices_min: 12,
+        vertices_max: 20,
+        elongation: 1.3,
+        flatness: 1.1,
+    };
+    let mut bodies = BodySet::default();
+    let mut slab = ConvexPolyhedron::cuboid(DVec3::new(10.0, 10.0, 0.5)).unwrap();
+    slab.position = DVec3::new(0.0, 0.0, -0.5); // top face at z = 0
+    bodies.add_polyhedron(slab, RHO, BodyKind::Fixed, 0);
+    let mut ids = Vec::new();
+    for k in 0..12 {
+        let mut g = random_grain(&mut rng, &params, 0.025 + 0.025 * (k as f64 / 11.0)).unwrap();
+        g.orientation = random_rotation(&mut rng) * g.orientation;
+        g.position = DVec3::new(
+            -0.6 + 0.1 * k as f64,
+            0.3 * (k % 3) as f64,
+            0.05 + 0.02 * (k % 4) as f64,
+        );
+        ids.push(bodies.add_polyhedron(g, RHO, BodyKind::Dynamic, 1));
+    }
+    let mut w = World::new(bodies, FrictionTable::new(0.8), StepSettings::default());
+    for _ in 0..3000 {
+        let r = w.step();
+        assert!(r.max_penetration < 2e-4, "overlap {} m", r.max_penetration);
+    }
+    for &i in &ids {
+        let Shape::Polyhedron(p) = &w.bodies.shape[i] else {
+            unreachable!()
+        };
+        let lowest = p
+            .vertices
+            .iter()
+            .map(|v| (w.bodies.position[i] + w.bodies.orientation[i] * *v).z)
+            .fold(f64::MAX, f64::min);
+        assert!(lowest > -2e-4, "grain {i} sank to {lowest} m");
+        assert!(
+            w.bodies.position[i].z > 0.0,
+            "grain {i} centre below the top face"
         );
     }
 }

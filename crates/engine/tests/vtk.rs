@@ -26,10 +26,10 @@ fn scene() -> World {
     let mut bodies = BodySet::default();
     bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
     let mut a = ConvexPolyhedron::cuboid(DVec3::splat(0.05)).unwrap();
-    a.position = DVec3::new(0.0, 0.0, 0.0503);
+    a.position = DVec3::new(0.0, 0.0, 0.0501);
     bodies.add_polyhedron(a, 2700.0, BodyKind::Dynamic, 1);
     let mut b = ConvexPolyhedron::cuboid(DVec3::new(0.06, 0.04, 0.03)).unwrap();
-    b.position = DVec3::new(0.3, 0.0, 0.0302);
+    b.position = DVec3::new(0.3, 0.0, 0.0301);
     b.orientation = DQuat::from_rotation_z(0.3) * b.orientation;
     let i = bodies.add_polyhedron(b, 2700.0, BodyKind::Dynamic, 2);
     bodies.velocity[i] = DVec3::new(0.2, 0.05, 0.0);
@@ -175,8 +175,8 @@ fn frames_read_back_with_meshio() {
         frames.push(expected_frame(&world, number));
     }
     assert!(
-        world.contacts.impulse.iter().any(|r| r.x > 0.0),
-        "no compressive contact to check"
+        world.contacts.status.contains(&ContactStatus::Slide),
+        "the moving box should slide"
     );
     let expected = dir.join("expected.json");
     std::fs::write(
@@ -224,7 +224,7 @@ fn pvd(path: &Path) -> Vec<(f64, String)> {
         .collect()
 }
 
-fn files(dir: &Path, series: &str, numbers: &[usize]) -> Vec<String> {
+fn files(series: &str, numbers: &[usize]) -> Vec<String> {
     numbers
         .iter()
         .map(|n| format!("vtk/{series}_{n:06}.vtu"))
@@ -238,7 +238,7 @@ fn assert_series(dir: &Path, times: &[f64], numbers: &[usize]) {
         let got_times: Vec<f64> = listed.iter().map(|f| f.0).collect();
         let got_files: Vec<String> = listed.iter().map(|f| f.1.clone()).collect();
         assert_eq!(got_times, times, "{series}.pvd times");
-        assert_eq!(got_files, files(dir, series, numbers), "{series}.pvd files");
+        assert_eq!(got_files, files(series, numbers), "{series}.pvd files");
         assert!(
             got_times.windows(2).all(|w| w[0] < w[1]),
             "{series}: times not increasing"

@@ -42,7 +42,7 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-/// Names of the three series, in the order of [`VtkWriter::series`].
+/// Names of the three series, in the order of `VtkWriter::series`.
 const SERIES: [&str; 3] = ["grains", "bodies", "contacts"];
 /// Sub-folder of the output folder holding the `.vtu` files.
 const SUBDIR: &str = "vtk";
@@ -134,26 +134,22 @@ impl VtkWriter {
     /// so the collection times stay strictly increasing.
     pub fn write_frame(&mut self, world: &World) -> io::Result<()> {
         let time = world.time;
-        let number = self.next;
         let mut appended = false;
         for (k, name) in SERIES.iter().enumerate() {
-            let file = match self.series[k].last() {
-                Some(last) if last.time == time => last.file.clone(),
-                _ => {
-                    appended = true;
-                    let file = format!("{SUBDIR}/{name}_{number:06}.vtu");
-                    self.series[k].push(Frame {
-                        time,
-                        file: file.clone(),
-                    });
-                    file
-                }
+            let (file, new) = match self.series[k].last() {
+                Some(last) if last.time == time => (last.file.clone(), false),
+                _ => (format!("{SUBDIR}/{name}_{:06}.vtu", self.next), true),
             };
             let path = self.dir.join(&file);
             match k {
                 0 => write_bodies(&path, world, false)?,
                 1 => write_bodies(&path, world, true)?,
                 _ => write_contacts(&path, world)?,
+            }
+            // Listed only once written, so a failed write never reaches a `.pvd`.
+            if new {
+                self.series[k].push(Frame { time, file });
+                appended = true;
             }
         }
         if appended {

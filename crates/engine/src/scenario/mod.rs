@@ -8,7 +8,9 @@
 //! theta = 0.5          # in [0.5, 1]
 //! gravity = [0, 0, -9.81]
 //! alert = 1e-3         # m
-//! output_interval = 50 # steps between recorded rows
+//! output_interval = 50 # steps between rows of series.csv
+//! checkpoint_interval = 1000 # steps between checkpoints (0 = only at the end)
+//! vtk_interval = 500   # steps between ParaView frames (0 = none)
 //!
 //! [solver]
 //! tolerance = 1e-4
@@ -96,6 +98,19 @@ pub struct Simulation {
     pub alert: f64,
     #[serde(default = "default_interval")]
     pub output_interval: u64,
+    /// Steps between checkpoints (one is also written at the end of a run); 0 = only at the end.
+    #[serde(default = "default_checkpoint_interval")]
+    pub checkpoint_interval: u64,
+    /// Steps between ParaView frames; 0 = none.
+    #[serde(default = "default_vtk_interval")]
+    pub vtk_interval: u64,
+}
+
+fn default_checkpoint_interval() -> u64 {
+    1000
+}
+fn default_vtk_interval() -> u64 {
+    500
 }
 
 fn half() -> f64 {

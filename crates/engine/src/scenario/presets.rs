@@ -39,6 +39,8 @@ pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenari
             gravity: [0.0, 0.0, -9.81],
             alert: 1e-3,
             output_interval: 50,
+            checkpoint_interval: 1000,
+            vtk_interval: 500,
         },
         solver: SolverSettings {
             tolerance: 1e-4,
