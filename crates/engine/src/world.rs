@@ -23,6 +23,7 @@ use crate::solver::{
     SolverSettings,
 };
 use crate::timing::{Lap, PhaseTimes};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Time-stepping settings.
@@ -199,24 +200,27 @@ impl World {
 
         // 2. Free velocities.
         let b = &self.bodies;
-        self.solver_bodies.clear();
-        for i in 0..b.len() {
-            let (v, w) = match b.kind[i] {
-                BodyKind::Dynamic => (b.velocity[i] + s.gravity * h, b.angular_velocity[i]),
-                BodyKind::Kinematic => match &b.driver[i] {
-                    Some(d) => d.velocity(t1),
-                    None => (DVec3::ZERO, DVec3::ZERO),
-                },
-                BodyKind::Fixed => (DVec3::ZERO, DVec3::ZERO),
-            };
-            let inv_inertia = b.inv_inertia_world(i);
-            self.solver_bodies.push(SolverBody {
-                v,
-                w,
-                inv_mass: b.inv_mass[i],
-                inv_inertia,
-            });
-        }
+        let gravity = s.gravity;
+        (0..b.len())
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|i| {
+                let (v, w) = match b.kind[i] {
+                    BodyKind::Dynamic => (b.velocity[i] + gravity * h, b.angular_velocity[i]),
+                    BodyKind::Kinematic => match &b.driver[i] {
+                        Some(d) => d.velocity(t1),
+                        None => (DVec3::ZERO, DVec3::ZERO),
+                    },
+                    BodyKind::Fixed => (DVec3::ZERO, DVec3::ZERO),
+                };
+                SolverBody {
+                    v,
+                    w,
+                    inv_mass: b.inv_mass[i],
+                    inv_inertia: b.inv_inertia_world(i),
+                }
+            })
+            .collect_into_vec(&mut self.solver_bodies);
         self.free_w.clear();
         self.free_w.extend(self.solver_bodies.iter().map(|sb| sb.w));
         times.other += lap.lap();
@@ -270,35 +274,46 @@ impl World {
         times.nlgs += lap.lap();
         let free_w = &self.free_w;
 
-        // 4. Update.
+        // 4. Update, in parallel over bodies (each body's update reads only its own data).
         let b = &mut self.bodies;
-        for (i, sb) in self.solver_bodies.iter().enumerate() {
-            let (v1, w1) = (sb.v, sb.w);
-            let (v0, w0) = (b.velocity[i], b.angular_velocity[i]);
-            if b.kind[i] == BodyKind::Fixed {
-                continue;
-            }
-            let (pv, pw) = if corrected {
-                (self.pseudo[i].v, self.pseudo[i].w)
-            } else {
-                (DVec3::ZERO, DVec3::ZERO)
-            };
-            b.position[i] += (v1 * theta + v0 * (1.0 - theta) + pv) * h;
-            let rot = (w1 * theta + w0 * (1.0 - theta) + pw) * h;
-            let q_old = b.orientation[i];
-            b.orientation[i] = (DQuat::from_scaled_axis(rot) * q_old).normalize();
-            b.velocity[i] = v1;
-            if b.kind[i] == BodyKind::Dynamic {
-                let i_w_old = {
-                    let r = DMat3::from_quat(q_old);
-                    r * DMat3::from_diagonal(b.inertia[i]) * r.transpose()
+        let (kind, inertia) = (&b.kind, &b.inertia);
+        let (sbs, pseudo) = (&self.solver_bodies, &self.pseudo);
+        (
+            b.position.par_iter_mut(),
+            b.orientation.par_iter_mut(),
+            b.velocity.par_iter_mut(),
+            b.angular_velocity.par_iter_mut(),
+            b.angular_momentum.par_iter_mut(),
+        )
+            .into_par_iter()
+            .enumerate()
+            .with_min_len(256)
+            .for_each(|(i, (x, q, v, w, l))| {
+                if kind[i] == BodyKind::Fixed {
+                    return;
+                }
+                let (v1, w1) = (sbs[i].v, sbs[i].w);
+                let (pv, pw) = if corrected {
+                    (pseudo[i].v, pseudo[i].w)
+                } else {
+                    (DVec3::ZERO, DVec3::ZERO)
                 };
-                b.angular_momentum[i] += i_w_old * (w1 - free_w[i]);
-                b.angular_velocity[i] = b.inv_inertia_world(i) * b.angular_momentum[i];
-            } else {
-                b.angular_velocity[i] = w1;
-            }
-        }
+                *x += (v1 * theta + *v * (1.0 - theta) + pv) * h;
+                let rot = (w1 * theta + *w * (1.0 - theta) + pw) * h;
+                let q_old = *q;
+                *q = (DQuat::from_scaled_axis(rot) * q_old).normalize();
+                *v = v1;
+                if kind[i] == BodyKind::Dynamic {
+                    let world_inertia = |q: DQuat, d: DVec3| {
+                        let r = DMat3::from_quat(q);
+                        r * DMat3::from_diagonal(d) * r.transpose()
+                    };
+                    *l += world_inertia(q_old, inertia[i]) * (w1 - free_w[i]);
+                    *w = world_inertia(*q, inertia[i].recip()) * *l;
+                } else {
+                    *w = w1;
+                }
+            });
         self.time += h;
         self.step_index += 1;
         times.other += lap.lap();

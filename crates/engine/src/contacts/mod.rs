@@ -77,65 +77,93 @@ impl ContactSet {
         previous: &ContactSet,
         match_fraction: f64,
     ) {
+        use rayon::prelude::*;
+        let key = |c: &RawContact| (c.body1.min(c.body2), c.body1.max(c.body2));
+        // Pairs are independent: match them in parallel, keep the order.
+        let groups: Vec<Vec<Built>> = raw
+            .par_chunk_by(|a, b| key(a) == key(b))
+            .map(|group| {
+                let k = key(&group[0]);
+                let p0 = partition(previous, |j| previous.key(j) < k);
+                let p1 = partition(previous, |j| previous.key(j) <= k);
+                let mut used = vec![false; p1 - p0];
+                group
+                    .iter()
+                    .map(|c| {
+                        build_one(c, bodies, friction, previous, p0, &mut used, match_fraction)
+                    })
+                    .collect()
+            })
+            .collect();
         self.clear();
-        let mut used = vec![false; previous.len()];
-        let mut k = 0;
-        while k < raw.len() {
-            let key = (
-                raw[k].body1.min(raw[k].body2),
-                raw[k].body1.max(raw[k].body2),
-            );
-            let mut end = k + 1;
-            while end < raw.len()
-                && (
-                    raw[end].body1.min(raw[end].body2),
-                    raw[end].body1.max(raw[end].body2),
-                ) == key
-            {
-                end += 1;
-            }
-            let p0 = partition(previous, |j| previous.key(j) < key);
-            let p1 = partition(previous, |j| previous.key(j) <= key);
-            for c in &raw[k..end] {
-                let (b1, b2) = (c.body1 as usize, c.body2 as usize);
-                let q1 = bodies.orientation[b1];
-                let local = q1.inverse() * (c.point - bodies.position[b1]);
-                let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
-                let mut best: Option<(f64, usize)> = None;
-                for (j, &was_used) in used.iter().enumerate().take(p1).skip(p0) {
-                    if was_used || previous.body1[j] != c.body1 {
-                        continue;
-                    }
-                    let d = previous.local_point[j].distance(local);
-                    if d <= tol && best.is_none_or(|(bd, _)| d < bd) {
-                        best = Some((d, j));
-                    }
-                }
-                let (t, s) = frame_from_normal(c.normal);
-                let (impulse, status) = match best {
-                    Some((_, j)) => {
-                        used[j] = true;
-                        let r = previous.world_impulse(j);
-                        (
-                            DVec3::new(r.dot(c.normal), r.dot(t), r.dot(s)),
-                            previous.status[j],
-                        )
-                    }
-                    None => (DVec3::ZERO, ContactStatus::NoContact),
-                };
-                self.body1.push(c.body1);
-                self.body2.push(c.body2);
-                self.point.push(c.point);
-                self.frame.push([c.normal, t, s]);
-                self.gap.push(c.gap);
-                self.mu
-                    .push(friction.get(bodies.group[b1], bodies.group[b2]));
-                self.impulse.push(impulse);
-                self.status.push(status);
-                self.local_point.push(local);
-            }
-            k = end;
+        for c in groups.into_iter().flatten() {
+            self.body1.push(c.raw.body1);
+            self.body2.push(c.raw.body2);
+            self.point.push(c.raw.point);
+            self.frame.push(c.frame);
+            self.gap.push(c.raw.gap);
+            self.mu.push(c.mu);
+            self.impulse.push(c.impulse);
+            self.status.push(c.status);
+            self.local_point.push(c.local);
         }
+    }
+}
+
+/// A contact being built by [`ContactSet::rebuild`].
+struct Built {
+    raw: RawContact,
+    frame: [DVec3; 3],
+    mu: f64,
+    impulse: DVec3,
+    status: ContactStatus,
+    local: DVec3,
+}
+
+/// Frame, friction and warm start of one detected point; `used[j - p0]` marks the previous
+/// contacts of this pair already taken.
+fn build_one(
+    c: &RawContact,
+    bodies: &BodySet,
+    friction: &FrictionTable,
+    previous: &ContactSet,
+    p0: usize,
+    used: &mut [bool],
+    match_fraction: f64,
+) -> Built {
+    let (b1, b2) = (c.body1 as usize, c.body2 as usize);
+    let local = bodies.orientation[b1].inverse() * (c.point - bodies.position[b1]);
+    let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
+    let mut best: Option<(f64, usize)> = None;
+    for (u, &was_used) in used.iter().enumerate() {
+        let j = p0 + u;
+        if was_used || previous.body1[j] != c.body1 {
+            continue;
+        }
+        let d = previous.local_point[j].distance(local);
+        if d <= tol && best.is_none_or(|(bd, _)| d < bd) {
+            best = Some((d, j));
+        }
+    }
+    let (t, s) = frame_from_normal(c.normal);
+    let (impulse, status) = match best {
+        Some((_, j)) => {
+            used[j - p0] = true;
+            let r = previous.world_impulse(j);
+            (
+                DVec3::new(r.dot(c.normal), r.dot(t), r.dot(s)),
+                previous.status[j],
+            )
+        }
+        None => (DVec3::ZERO, ContactStatus::NoContact),
+    };
+    Built {
+        raw: *c,
+        frame: [c.normal, t, s],
+        mu: friction.get(bodies.group[b1], bodies.group[b2]),
+        impulse,
+        status,
+        local,
     }
 }
 

@@ -140,34 +140,32 @@ impl Detector {
                         + bodies.angular_velocity[i].length() * p.radius)
                 }
             }));
-        self.aabbs.clear();
-        let mut polys = Vec::with_capacity(n);
-        let mut planes = Vec::new();
-        for i in 0..n {
-            match &bodies.shape[i] {
+        let (cache, margins) = (&self.cache, &self.margins);
+        (0..n)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|i| match &bodies.shape[i] {
                 Shape::Polyhedron(_) => {
-                    let c = &self.cache;
-                    let v = &c.vertices[c.vertex_start[i]..c.vertex_start[i + 1]];
+                    let v = &cache.vertices[cache.vertex_start[i]..cache.vertex_start[i + 1]];
                     let (lo, hi) = v.iter().fold(
                         (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
                         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
                     );
-                    let half = DVec3::splat(0.5 * alert + self.margins[i]);
-                    self.aabbs.push(Aabb {
+                    let half = DVec3::splat(0.5 * alert + margins[i]);
+                    Aabb {
                         min: lo - half,
                         max: hi + half,
-                    });
-                    polys.push(i as u32);
+                    }
                 }
-                Shape::Plane { .. } => {
-                    self.aabbs.push(Aabb {
-                        min: DVec3::ZERO,
-                        max: DVec3::ZERO,
-                    });
-                    planes.push(i as u32);
-                }
-            }
-        }
+                Shape::Plane { .. } => Aabb {
+                    min: DVec3::ZERO,
+                    max: DVec3::ZERO,
+                },
+            })
+            .collect_into_vec(&mut self.aabbs);
+        let is_plane = |i: usize| matches!(bodies.shape[i], Shape::Plane { .. });
+        let polys: Vec<u32> = (0..n as u32).filter(|&i| !is_plane(i as usize)).collect();
+        let planes: Vec<u32> = (0..n as u32).filter(|&i| is_plane(i as usize)).collect();
         let dynamic = |i: u32| bodies.kind[i as usize] == BodyKind::Dynamic;
         let mut pairs = std::mem::take(&mut self.pairs);
         self.broad.find_pairs(
