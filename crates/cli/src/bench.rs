@@ -56,11 +56,7 @@ pub fn bench(
             sweeps += r.solve.iterations as u64;
             updates += (r.contacts * r.solve.iterations) as u64;
         }
-        let mut t = world.timers;
-        t.detection -= before.detection;
-        t.nlgs -= before.nlgs;
-        t.other -= before.other;
-        t.total -= before.total;
+        let t = world.timers - before;
         let case = Case {
             name: format!("pile_{n}"),
             grains: n,

@@ -67,6 +67,14 @@ enum Command {
         /// monolithic NLGS and DDM for each `--partitions`, on 1, 2 and all threads.
         #[arg(long)]
         scaling: bool,
+        /// Scaling study: fixed NLGS sweeps per step (as the paper's 740) instead of the
+        /// tolerance-based stop.
+        #[arg(long)]
+        sweeps: Option<usize>,
+        /// Scaling study: settled packing to reuse, written after settling if absent
+        /// (`--steps 0` only prepares it).
+        #[arg(long)]
+        packing: Option<PathBuf>,
         /// Partitions of the scaling study.
         #[arg(long, value_delimiter = ',', value_parser = parse_subdomains, default_value = "2x1x1,2x2x1,4x4x1")]
         partitions: Vec<[usize; 3]>,
@@ -132,8 +140,18 @@ fn main() -> ExitCode {
             steps,
             scaling: true,
             partitions,
+            sweeps,
+            packing,
             ..
-        } => scaling::scaling(json.as_deref(), grains[0], settle_steps, steps, &partitions),
+        } => scaling::scaling(&scaling::ScalingArgs {
+            json: json.as_deref(),
+            grains: grains[0],
+            settle_steps,
+            steps,
+            partitions: &partitions,
+            sweeps,
+            packing: packing.as_deref(),
+        }),
         Command::Bench {
             json,
             grains,

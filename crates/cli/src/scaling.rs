@@ -7,6 +7,7 @@
 //! compare a configuration with itself on one thread: results are bit-identical across thread
 //! counts, so the same work is timed.
 
+use ballast_engine::output::checkpoint::{read_checkpoint, write_checkpoint};
 use ballast_engine::scenario::presets::pile;
 use ballast_engine::solver::ddm::DdmProblem;
 use ballast_engine::solver::{DdmSettings, SolverSettings};
@@ -78,13 +79,7 @@ fn time_case(
             }
             None => 0.0,
         };
-        let mut t = w.timers;
-        t.detection -= before.detection;
-        t.nlgs -= before.nlgs;
-        t.subdomains -= before.subdomains;
-        t.interface -= before.interface;
-        t.other -= before.other;
-        t.total -= before.total;
+        let t = w.timers - before;
         let n = steps as f64;
         Measured {
             times: t,
@@ -96,19 +91,29 @@ fn time_case(
     }))
 }
 
-/// Runs the scaling study and prints the Table-1 and speedup rows.
-pub fn scaling(
-    json: Option<&Path>,
-    grains: usize,
-    settle_steps: u64,
-    steps: u64,
-    partitions: &[[usize; 3]],
-) -> Result<(), String> {
+/// What the scaling study was asked to do.
+pub struct ScalingArgs<'a> {
+    pub json: Option<&'a Path>,
+    pub grains: usize,
+    pub settle_steps: u64,
+    pub steps: u64,
+    pub partitions: &'a [[usize; 3]],
+    /// Fixed NLGS sweeps (or DDM iterations) per step instead of the tolerance-based stop.
+    pub sweeps: Option<usize>,
+    /// Settled packing to load, or to write after settling if it does not exist yet.
+    pub packing: Option<&'a Path>,
+}
+
+/// Runs the scaling study and prints the Table-1 and speedup rows. With `steps = 0` it only
+/// prepares the packing.
+pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
+    let (json, grains, settle_steps, steps, partitions) =
+        (a.json, a.grains, a.settle_steps, a.steps, a.partitions);
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut threads = vec![1, 2, all];
     threads.sort_unstable();
     threads.dedup();
-    // 1. Pour and settle once, cheaply.
+    // 1. Pour and settle once, cheaply (or load the packing settled before).
     let mut scenario = pile(grains, [0.025, 0.05], 1, settle_steps);
     scenario.solver = SolverSettings {
         tolerance: 1e-3,
@@ -116,12 +121,38 @@ pub fn scaling(
         ..Default::default()
     };
     let mut settled = scenario.build().map_err(|e| e.to_string())?;
-    eprintln!("settling {grains} grains for {settle_steps} steps …");
-    for _ in 0..settle_steps {
-        settled.step();
+    match a.packing {
+        Some(path) if path.exists() => {
+            read_checkpoint(path, &mut settled).map_err(|e| e.to_string())?;
+            eprintln!(
+                "loaded the settled packing {} (step {})",
+                path.display(),
+                settled.step_index
+            );
+        }
+        _ => {
+            eprintln!("settling {grains} grains for {settle_steps} steps …");
+            for _ in 0..settle_steps {
+                settled.step();
+            }
+            if let Some(path) = a.packing {
+                write_checkpoint(&settled, path)
+                    .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+            }
+        }
     }
-    // 2. Measured settings: the engine's defaults.
-    settled.settings.solver = SolverSettings::default();
+    if steps == 0 {
+        return Ok(());
+    }
+    // 2. Measured settings: the engine's defaults, or a fixed number of sweeps.
+    settled.settings.solver = match a.sweeps {
+        Some(n) => SolverSettings {
+            tolerance: 1e-300,
+            max_iterations: n,
+            ..Default::default()
+        },
+        None => SolverSettings::default(),
+    };
     let mut configs: Vec<Option<DdmSettings>> = vec![None];
     configs.extend(partitions.iter().map(|&d| {
         Some(DdmSettings {

@@ -31,6 +31,21 @@ impl std::ops::AddAssign for PhaseTimes {
     }
 }
 
+impl std::ops::Sub for PhaseTimes {
+    type Output = PhaseTimes;
+    /// Time spent between two cumulated readings.
+    fn sub(self, o: Self) -> Self {
+        PhaseTimes {
+            detection: self.detection - o.detection,
+            nlgs: self.nlgs - o.nlgs,
+            subdomains: self.subdomains - o.subdomains,
+            interface: self.interface - o.interface,
+            other: self.other - o.other,
+            total: self.total - o.total,
+        }
+    }
+}
+
 /// A running stopwatch returning elapsed seconds since the last lap.
 pub struct Lap(Instant);
 
