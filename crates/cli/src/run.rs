@@ -130,6 +130,15 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
     let summary = Summary::new(&world, &stats, a.threads);
     summary.write(&out.join("summary.json")).map_err(io)?;
+    // The report and its plots: a failure is a warning, the run's data is already safe.
+    match serde_json::to_value(&summary) {
+        Ok(v) => {
+            if let Err(e) = crate::report::write_run_report(out, file, &text, &v) {
+                eprintln!("warning: report: {e}");
+            }
+        }
+        Err(e) => eprintln!("warning: report: {e}"),
+    }
     if stats.not_converged > 0 {
         eprintln!(
             "warning: NLGS did not reach tolerance {} in {} of {} steps (max residual {:.3e})",

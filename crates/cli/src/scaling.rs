@@ -219,6 +219,32 @@ pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
         }
     }
     if let Some(path) = json {
+        // Plots next to the JSON: FILE_plots/{speedup,efficiency,timings}.png.
+        let stem = path
+            .file_stem()
+            .map_or("scaling".into(), |s| s.to_string_lossy().to_string());
+        let dir = path.with_file_name(format!("{stem}_plots"));
+        let points: Vec<crate::report::ScalingPoint> = cases
+            .iter()
+            .map(|c| {
+                let t = &c.timings_s;
+                let label = match c.subdomains.as_str() {
+                    "1x1x1" => "NLGS".to_string(),
+                    d => format!("DDM {d}"),
+                };
+                let nlgs = (t.nlgs - t.interface).max(0.0);
+                (
+                    label,
+                    c.threads,
+                    c.speedup,
+                    c.efficiency,
+                    [t.detection, nlgs, t.interface, t.other],
+                )
+            })
+            .collect();
+        if let Err(e) = crate::report::write_scaling_plots(&dir, &points) {
+            eprintln!("warning: plots: {e}");
+        }
         let text = serde_json::to_string_pretty(&cases).map_err(|e| e.to_string())?;
         std::fs::write(path, text).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
     }
