@@ -267,14 +267,26 @@ fn run_plots(dir: &Path, t: &Table, summary: &Value) -> Plots {
         ));
     }
     if let Some(c) = t.col("residual") {
-        let mut series = vec![line("residual", c, 1.0)];
+        // Both measures, and the tolerance labelled with the norm it applies to.
+        let mut series = vec![line("natural-map residual", c, 1.0)];
+        if let Some(q) = t.col("quad") {
+            series.push(line("Quad norm", q, 1.0));
+        }
         if let (Some(tol), Some((x0, x1))) = (num(summary, "/solver/tolerance"), x_span(t, x)) {
+            let norm = summary
+                .pointer("/solver/norm")
+                .and_then(|v| v.as_str())
+                .unwrap_or("?");
             series.push(
-                Series::new("tolerance", vec![(x0, tol), (x1, tol)], Style::Dashed)
-                    .with_color(REFERENCE),
+                Series::new(
+                    format!("tolerance ({norm})"),
+                    vec![(x0, tol), (x1, tol)],
+                    Style::Dashed,
+                )
+                .with_color(REFERENCE),
             );
         }
-        let mut ch = chart("NLGS residual", x_label, "residual (-)", series);
+        let mut ch = chart("NLGS convergence", x_label, "residual (-)", series);
         ch.log_y = true;
         panels.push(ch);
     }
