@@ -154,17 +154,18 @@ impl GradingCurve {
     /// |-----------:|---------:|---------:|
     /// | 22.4       | 0–3      | 1.5      |
     /// | 31.5       | 1–25     | 13       |
-    /// | 40         | 25–70    | 47.5     |
-    /// | 50         | 89–100   | 94.5     |
+    /// | 40         | 30–65    | 47.5     |
+    /// | 50         | 70–99    | 84.5     |
     /// | 63         | 100      | 100      |
     ///
-    /// The bands are those of the project's specification; they were not checked against the
-    /// text of the standard, which was not available to us. Below 22.4 mm the curve goes to 0
+    /// These are the bands of EN 13450 grading category A as recalled by the team (two
+    /// independent recollections agree); the text of the standard was not at hand, so check
+    /// them against a copy before contractual use. Below 22.4 mm the curve goes to 0
     /// at 15.9 mm (see the module documentation).
     pub fn en13450_31_5_50() -> Self {
         Self::standard(
             &[22.4, 31.5, 40.0, 50.0, 63.0],
-            &[0.015, 0.13, 0.475, 0.945, 1.0],
+            &[0.015, 0.13, 0.475, 0.845, 1.0],
         )
     }
 
@@ -177,13 +178,13 @@ impl GradingCurve {
     /// |-----------:|---------:|---------:|
     /// | 22.4       | 0–3      | 1.5      |
     /// | 25         | 0–15     | 7.5      |
-    /// | 50         | 89–100   | 94.5     |
+    /// | 50         | 70–99    | 84.5     |
     /// | 63         | 100      | 100      |
     ///
-    /// (The implied passing is 36.5 % at 31.5 mm and 66.5 % at 40 mm.) Replace it with the
+    /// (The implied passing is 33.2 % at 31.5 mm and 59.7 % at 40 mm.) Replace it with the
     /// contractual table through [`GradingCurve::from_table`] when one is at hand.
     pub fn en13450_25_50() -> Self {
-        Self::standard(&[22.4, 25.0, 50.0, 63.0], &[0.015, 0.075, 0.945, 1.0])
+        Self::standard(&[22.4, 25.0, 50.0, 63.0], &[0.015, 0.075, 0.845, 1.0])
     }
 
     /// A built-in table, valid by construction (checked by the tests).
@@ -436,11 +437,11 @@ mod tests {
         assert!((c.min_size_mm() - 22.4 * 22.4 / 31.5).abs() < 1e-12);
         assert_eq!(c.max_size_mm(), 63.0);
         // Midpoints of the bands.
-        assert_eq!(c.passing(), &[0.015, 0.13, 0.475, 0.945, 1.0]);
+        assert_eq!(c.passing(), &[0.015, 0.13, 0.475, 0.845, 1.0]);
         // 25/50: log-linear between 25 and 50 mm, as documented.
         let c = GradingCurve::en13450_25_50();
-        assert!((c.passing_at(31.5) - 0.365).abs() < 5e-4);
-        assert!((c.passing_at(40.0) - 0.665).abs() < 5e-4);
+        assert!((c.passing_at(31.5) - 0.3317).abs() < 5e-4);
+        assert!((c.passing_at(40.0) - 0.5971).abs() < 5e-4);
     }
 
     #[test]
@@ -506,7 +507,7 @@ mod tests {
         assert_eq!(c.size_at_mass_fraction(1.0), 63.0);
         // d50 lies between 40 and 50 mm, where the curve crosses 0.5.
         let d50 = c.size_at_mass_fraction(0.5);
-        assert!((d50 - 40.0 * 1.25f64.powf(0.025 / 0.47)).abs() < 1e-12);
+        assert!((d50 - 40.0 * 1.25f64.powf(0.025 / 0.37)).abs() < 1e-12);
     }
 
     #[test]
