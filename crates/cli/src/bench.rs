@@ -24,6 +24,38 @@ struct Case {
     tolerance: f64,
 }
 
+/// What `steps` timed steps of a world measured.
+pub struct Measured {
+    /// Phase times over the timed steps.
+    pub times: ballast_engine::timing::PhaseTimes,
+    /// Mean contact points per step.
+    pub contacts: f64,
+    /// Mean NLGS sweeps (or DDM iterations) per step.
+    pub sweeps: f64,
+    /// Σ contacts × sweeps over the NLGS time.
+    pub updates_per_s: f64,
+}
+
+/// Times `steps` steps of `world` (≥ 1).
+pub fn measure(world: &mut ballast_engine::world::World, steps: u64) -> Measured {
+    let before = world.timers;
+    let (mut contacts, mut sweeps, mut updates) = (0u64, 0u64, 0u64);
+    for _ in 0..steps {
+        let r = world.step();
+        contacts += r.contacts as u64;
+        sweeps += r.solve.iterations as u64;
+        updates += (r.contacts * r.solve.iterations) as u64;
+    }
+    let times = world.timers - before;
+    let n = steps as f64;
+    Measured {
+        times,
+        contacts: contacts as f64 / n,
+        sweeps: sweeps as f64 / n,
+        updates_per_s: updates as f64 / times.nlgs.max(1e-12),
+    }
+}
+
 pub fn bench(
     json: Option<&Path>,
     sizes: &[usize],
@@ -48,24 +80,16 @@ pub fn bench(
         for _ in 0..settle_steps {
             world.step();
         }
-        let before = world.timers;
-        let (mut contacts, mut sweeps, mut updates) = (0u64, 0u64, 0u64);
-        for _ in 0..steps {
-            let r = world.step();
-            contacts += r.contacts as u64;
-            sweeps += r.solve.iterations as u64;
-            updates += (r.contacts * r.solve.iterations) as u64;
-        }
-        let t = world.timers - before;
+        let m = measure(&mut world, steps);
         let case = Case {
             name: format!("pile_{n}"),
             grains: n,
             threads,
-            contact_points: contacts as f64 / steps as f64,
-            ms_per_step: 1e3 * t.total / steps as f64,
-            sweeps_per_step: sweeps as f64 / steps as f64,
-            contact_updates_per_s: updates as f64 / t.nlgs.max(1e-12),
-            timings_s: t,
+            contact_points: m.contacts,
+            ms_per_step: 1e3 * m.times.total / steps as f64,
+            sweeps_per_step: m.sweeps,
+            contact_updates_per_s: m.updates_per_s,
+            timings_s: m.times,
             steps,
             settle_steps,
             tolerance: world.settings.solver.tolerance,

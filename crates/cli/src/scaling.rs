@@ -7,6 +7,7 @@
 //! compare a configuration with itself on one thread: results are bit-identical across thread
 //! counts, so the same work is timed.
 
+use crate::bench::{measure, Measured};
 use ballast_engine::output::checkpoint::{read_checkpoint, write_checkpoint};
 use ballast_engine::scenario::presets::pile;
 use ballast_engine::solver::ddm::DdmProblem;
@@ -33,22 +34,13 @@ pub struct ScalingCase {
     pub interface_contacts_fraction: f64,
 }
 
-/// What one timed configuration measured.
-struct Measured {
-    times: PhaseTimes,
-    contacts: f64,
-    sweeps: f64,
-    updates_per_s: f64,
-    interface_fraction: f64,
-}
-
 fn time_case(
     settled: &World,
     ddm: Option<DdmSettings>,
     threads: usize,
     warmup: u64,
     steps: u64,
-) -> Result<Measured, String> {
+) -> Result<(Measured, f64), String> {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -60,14 +52,7 @@ fn time_case(
         for _ in 0..warmup {
             w.step();
         }
-        let before = w.timers;
-        let (mut contacts, mut sweeps, mut updates) = (0u64, 0u64, 0u64);
-        for _ in 0..steps {
-            let r = w.step();
-            contacts += r.contacts as u64;
-            sweeps += r.solve.iterations as u64;
-            updates += (r.contacts * r.solve.iterations) as u64;
-        }
+        let m = measure(&mut w, steps);
         // Interface share of the last step's contacts.
         let interface_fraction = match &ddm {
             Some(d) => {
@@ -79,15 +64,7 @@ fn time_case(
             }
             None => 0.0,
         };
-        let t = w.timers - before;
-        let n = steps as f64;
-        Measured {
-            times: t,
-            contacts: contacts as f64 / n,
-            sweeps: sweeps as f64 / n,
-            updates_per_s: updates as f64 / t.nlgs.max(1e-12),
-            interface_fraction,
-        }
+        (m, interface_fraction)
     }))
 }
 
@@ -179,7 +156,7 @@ pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
         let label = ddm.as_ref().map_or("1x1x1".to_string(), |d| d.label());
         let mut t1 = None;
         for &p in &threads {
-            let m = time_case(&settled, ddm.clone(), p, 5, steps)?;
+            let (m, interface_fraction) = time_case(&settled, ddm.clone(), p, 5, steps)?;
             let t = m.times;
             let base = *t1.get_or_insert(t.total);
             let speedup = base / t.total;
@@ -214,7 +191,7 @@ pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
                 speedup,
                 efficiency: speedup / p as f64,
                 timings_s: t,
-                interface_contacts_fraction: m.interface_fraction,
+                interface_contacts_fraction: interface_fraction,
             });
         }
     }
