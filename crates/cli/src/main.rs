@@ -23,10 +23,21 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run a scenario file (TOML).
+    /// Run a scenario file (TOML), or a built-in track scenario: with no file, the default
+    /// tamping job (one sleeper block, its 4 tines, the paper's 1.764 s cycle).
     Run {
-        /// Scenario file.
-        file: PathBuf,
+        /// Scenario file (engine scenario, or track scenario with a [track] table).
+        file: Option<PathBuf>,
+        /// Built-in track scenario when no file is given: default, paper.
+        #[arg(long, conflicts_with = "file")]
+        preset: Option<String>,
+        /// Folder of prepared ballast beds, reused by later runs with the same parameters
+        /// (default: $BALLAST_CACHE, else ~/.cache/ballast).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+        /// Do not read or write prepared beds.
+        #[arg(long)]
+        no_cache: bool,
         /// Output folder (created): summary.json, series.csv, *.pvd + vtk/, checkpoints/.
         #[arg(long, default_value = "out", conflicts_with = "resume")]
         out: PathBuf,
@@ -99,6 +110,18 @@ fn parse_subdomains(s: &str) -> Result<[usize; 3], String> {
     Ok(out)
 }
 
+/// `$BALLAST_CACHE`, else `$XDG_CACHE_HOME/ballast`, else `~/.cache/ballast`.
+fn default_cache() -> Option<PathBuf> {
+    let var = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    var("BALLAST_CACHE")
+        .or_else(|| var("XDG_CACHE_HOME").map(|d| d.join("ballast")))
+        .or_else(|| var("HOME").map(|d| d.join(".cache").join("ballast")))
+}
+
 fn set_threads(threads: Option<usize>) -> Result<usize, String> {
     if let Some(n) = threads {
         if n == 0 {
@@ -117,6 +140,9 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run {
             file,
+            preset,
+            cache,
+            no_cache,
             out,
             resume,
             steps,
@@ -125,7 +151,13 @@ fn main() -> ExitCode {
             quiet,
         } => set_threads(threads).and_then(|threads| {
             run::run(&run::RunArgs {
-                file: &file,
+                file: file.as_deref(),
+                preset: preset.as_deref(),
+                cache: if no_cache {
+                    None
+                } else {
+                    cache.or_else(default_cache)
+                },
                 out: resume.as_deref().unwrap_or(&out),
                 resume: resume.is_some(),
                 steps,

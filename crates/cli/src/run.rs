@@ -1,22 +1,30 @@
-//! `ballast run FILE --out DIR` and `ballast run FILE --resume DIR`.
+//! `ballast run [FILE | --preset NAME] --out DIR` and `ballast run [FILE] --resume DIR`: engine
+//! scenarios and track scenarios (a `[track]` table: bed preparation, tamping, indicators).
 
 use crate::progress::Progress;
 use ballast_engine::output::checkpoint::{
     checkpoint_path, newest_valid_checkpoint, prune_checkpoints, write_checkpoint_with_stats,
 };
 use ballast_engine::output::vtk::VtkWriter;
-use ballast_engine::output::{series_row, RunStats, Summary, SERIES_HEADER};
+use ballast_engine::output::{series_row, write_atomic, RunStats, Summary, SERIES_HEADER};
 use ballast_engine::scenario::Scenario;
 use ballast_engine::solver::DdmSettings;
+use ballast_engine::world::{StepReport, World};
+use ballast_railway::indicators::Indicators;
+use ballast_railway::preparation::PrepProgress;
+use ballast_railway::{is_track_scenario, TrackScenario};
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Checkpoints kept in `DIR/checkpoints` (the newest ones).
 const KEEP_CHECKPOINTS: usize = 3;
 
 /// What `ballast run` was asked to do.
 pub struct RunArgs<'a> {
-    pub file: &'a Path,
+    /// Scenario file; `None`: `preset`, or `out/scenario.toml` when resuming.
+    pub file: Option<&'a Path>,
+    /// Built-in track scenario (`default`, `paper`) when there is no file.
+    pub preset: Option<&'a str>,
     pub out: &'a Path,
     /// Continue in `out` from its newest valid checkpoint.
     pub resume: bool,
@@ -24,18 +32,33 @@ pub struct RunArgs<'a> {
     pub threads: usize,
     pub subdomains: Option<[usize; 3]>,
     pub quiet: bool,
+    /// Folder of prepared ballast beds; `None`: no cache.
+    pub cache: Option<PathBuf>,
 }
 
-/// Runs a scenario file up to its step count (or `--steps`), writing `summary.json`,
-/// `series.csv`, ParaView frames and checkpoints in `out`.
-pub fn run(a: &RunArgs) -> Result<(), String> {
-    let (file, out) = (a.file, a.out);
-    let text = std::fs::read_to_string(file)
-        .map_err(|e| format!("cannot read scenario {}: {e}", file.display()))?;
-    let mut scenario =
-        Scenario::from_toml(&text).map_err(|e| format!("{}: {e}", file.display()))?;
-    if let Some(dims) = a.subdomains {
-        scenario.ddm = match (dims, scenario.ddm.take()) {
+/// A run ready to step: the world and what to write.
+struct Job {
+    world: World,
+    /// Where the scenario came from, for messages and the report.
+    source: String,
+    text: String,
+    steps: u64,
+    output_interval: u64,
+    vtk_interval: u64,
+    checkpoint_interval: u64,
+    track: Option<TrackParts>,
+}
+
+/// The track-specific parts of a run.
+struct TrackParts {
+    indicators: Indicators,
+    grains: usize,
+    preparation: serde_json::Value,
+}
+
+fn apply_subdomains(ddm: &mut Option<DdmSettings>, dims: Option<[usize; 3]>) {
+    if let Some(dims) = dims {
+        *ddm = match (dims, ddm.take()) {
             ([1, 1, 1], _) => None,
             (dims, d) => Some(DdmSettings {
                 subdomains: dims,
@@ -43,13 +66,150 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
             }),
         };
     }
-    let steps = a.steps.unwrap_or_else(|| scenario.steps());
-    let mut world = scenario
-        .build()
-        .map_err(|e| format!("{}: {e}", file.display()))?;
+}
+
+/// Reads the scenario (file, preset, or the run folder's copy when resuming) and builds it.
+fn job(a: &RunArgs) -> Result<Job, String> {
+    let (source, text) = match (a.file, a.preset) {
+        (Some(f), _) => (
+            f.display().to_string(),
+            std::fs::read_to_string(f)
+                .map_err(|e| format!("cannot read scenario {}: {e}", f.display()))?,
+        ),
+        (None, None) if a.resume => {
+            let f = a.out.join("scenario.toml");
+            (
+                f.display().to_string(),
+                std::fs::read_to_string(&f).map_err(|e| {
+                    format!(
+                        "--resume {}: cannot read {}: {e}",
+                        a.out.display(),
+                        f.display()
+                    )
+                })?,
+            )
+        }
+        (None, p) => {
+            let name = p.unwrap_or("default");
+            let s = TrackScenario::preset(name).map_err(|e| e.to_string())?;
+            (format!("preset {name}"), s.to_toml())
+        }
+    };
+    if is_track_scenario(&text) {
+        let mut s = TrackScenario::from_toml(&text).map_err(|e| format!("{source}: {e}"))?;
+        apply_subdomains(&mut s.ddm, a.subdomains);
+        let mut last = std::time::Instant::now();
+        let quiet = a.quiet;
+        if !quiet {
+            eprintln!(
+                "preparing the ballast bed ({} block(s), {} m × {} m), or reading it from the cache",
+                s.track.blocks,
+                s.track.length(),
+                s.track.width
+            );
+        }
+        let model = s
+            .build(a.cache.as_deref(), &mut |p: PrepProgress| {
+                if !quiet && last.elapsed().as_secs_f64() > 5.0 {
+                    last = std::time::Instant::now();
+                    eprintln!(
+                        "  {}: t = {:.3} s (at least {:.3} s), {} grains, {} contacts",
+                        if p.stage == 1 {
+                            "deposition"
+                        } else {
+                            "settling around the blocks"
+                        },
+                        p.time,
+                        p.target,
+                        p.grains,
+                        p.contacts
+                    );
+                }
+            })
+            .map_err(|e| format!("{source}: {e}"))?;
+        if let Some(w) = &model.cache_warning {
+            eprintln!("warning: {w}");
+        }
+        if !quiet {
+            let r = &model.preparation;
+            eprintln!(
+                "bed {}: {} grains ({} steps of deposition, {:.1} s)",
+                if model.from_cache {
+                    "read from the cache"
+                } else {
+                    "prepared"
+                },
+                r.grains,
+                r.steps,
+                r.wall_s
+            );
+        }
+        let sim = &s.simulation;
+        Ok(Job {
+            steps: a.steps.unwrap_or_else(|| s.steps()),
+            output_interval: sim.output_interval,
+            vtk_interval: sim.vtk_interval,
+            checkpoint_interval: sim.checkpoint_interval,
+            track: Some(TrackParts {
+                grains: model.layout.grains.len(),
+                preparation: serde_json::to_value(&model.preparation).unwrap_or_default(),
+                indicators: model.indicators,
+            }),
+            world: model.world,
+            source,
+            text: s.to_toml(),
+        })
+    } else {
+        let mut scenario = Scenario::from_toml(&text).map_err(|e| format!("{source}: {e}"))?;
+        apply_subdomains(&mut scenario.ddm, a.subdomains);
+        let world = scenario.build().map_err(|e| format!("{source}: {e}"))?;
+        let sim = &scenario.simulation;
+        Ok(Job {
+            steps: a.steps.unwrap_or_else(|| scenario.steps()),
+            output_interval: sim.output_interval,
+            vtk_interval: sim.vtk_interval,
+            checkpoint_interval: sim.checkpoint_interval,
+            track: None,
+            world,
+            source,
+            text: text.to_string(),
+        })
+    }
+}
+
+/// Runs a scenario (file or preset) up to its step count (or `--steps`), writing
+/// `scenario.toml`, `summary.json`, `series.csv`, ParaView frames and checkpoints in `out`.
+pub fn run(a: &RunArgs) -> Result<(), String> {
+    let out = a.out;
+    let Job {
+        mut world,
+        source,
+        text,
+        steps,
+        output_interval,
+        vtk_interval,
+        checkpoint_interval,
+        track,
+    } = job(a)?;
     let io = |e: std::io::Error| format!("write error in {}: {e}", out.display());
     let ckpt_dir = out.join("checkpoints");
     let series_path = out.join("series.csv");
+    let mut header = SERIES_HEADER.to_string();
+    if let Some(t) = &track {
+        for n in t.indicators.names() {
+            header.push(',');
+            header.push_str(n);
+        }
+    }
+    let row = |r: &StepReport, world: &World| {
+        let mut line = series_row(r, world.bodies.kinetic_energy());
+        if let Some(t) = &track {
+            for v in t.indicators.values(world) {
+                line.push_str(&format!(",{v:.9e}"));
+            }
+        }
+        line
+    };
     let mut stats = RunStats::default();
     let (mut series, mut vtk) = if a.resume {
         let scan = newest_valid_checkpoint(&ckpt_dir, &mut world).map_err(|e| e.to_string())?;
@@ -80,7 +240,7 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
             })
             .collect();
         let mut f = std::io::BufWriter::new(std::fs::File::create(&series_path).map_err(io)?);
-        writeln!(f, "{SERIES_HEADER}").map_err(io)?;
+        writeln!(f, "{header}").map_err(io)?;
         for l in kept {
             writeln!(f, "{l}").map_err(io)?;
         }
@@ -89,29 +249,29 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     } else {
         std::fs::create_dir_all(out)
             .map_err(|e| format!("cannot create output folder {}: {e}", out.display()))?;
+        write_atomic(&out.join("scenario.toml"), text.as_bytes()).map_err(io)?;
         let mut f = std::io::BufWriter::new(std::fs::File::create(&series_path).map_err(io)?);
-        writeln!(f, "{SERIES_HEADER}").map_err(io)?;
+        writeln!(f, "{header}").map_err(io)?;
         let mut vtk = VtkWriter::new(out).map_err(io)?;
-        if scenario.simulation.vtk_interval > 0 {
+        if vtk_interval > 0 {
             vtk.write_frame(&world).map_err(io)?;
         }
         (f, vtk)
     };
     std::fs::create_dir_all(&ckpt_dir).map_err(io)?;
-    let sim = &scenario.simulation;
     let start = world.step_index;
     let mut progress = Progress::new(steps.saturating_sub(start), a.quiet);
     while world.step_index < steps {
         let r = world.step();
         stats.add(&r);
         let k = r.step;
-        if k % sim.output_interval == 0 || k == steps {
-            writeln!(series, "{}", series_row(&r, world.bodies.kinetic_energy())).map_err(io)?;
+        if k % output_interval == 0 || k == steps {
+            writeln!(series, "{}", row(&r, &world)).map_err(io)?;
         }
-        if sim.vtk_interval > 0 && (k % sim.vtk_interval == 0 || k == steps) {
+        if vtk_interval > 0 && (k % vtk_interval == 0 || k == steps) {
             vtk.write_frame(&world).map_err(io)?;
         }
-        if sim.checkpoint_interval > 0 && k % sim.checkpoint_interval == 0 && k != steps {
+        if checkpoint_interval > 0 && k % checkpoint_interval == 0 && k != steps {
             series.flush().map_err(io)?;
             write_checkpoint_with_stats(&world, Some(&stats), &checkpoint_path(&ckpt_dir, k))
                 .map_err(io)?;
@@ -129,15 +289,25 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     .map_err(io)?;
     prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
     let summary = Summary::new(&world, &stats, a.threads);
-    summary.write(&out.join("summary.json")).map_err(io)?;
+    let mut value = serde_json::to_value(&summary).map_err(|e| e.to_string())?;
+    if let (Some(t), Some(map)) = (&track, value.as_object_mut()) {
+        // Track runs add keys (never rename): grains, final indicators, the preparation.
+        map.insert("grains".into(), t.grains.into());
+        let finals: serde_json::Map<String, serde_json::Value> = t
+            .indicators
+            .names()
+            .iter()
+            .cloned()
+            .zip(t.indicators.values(&world).into_iter().map(Into::into))
+            .collect();
+        map.insert("indicators".into(), finals.into());
+        map.insert("preparation".into(), t.preparation.clone());
+    }
+    let json = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())?;
+    write_atomic(&out.join("summary.json"), json.as_bytes()).map_err(io)?;
     // The report and its plots: a failure is a warning, the run's data is already safe.
-    match serde_json::to_value(&summary) {
-        Ok(v) => {
-            if let Err(e) = crate::report::write_run_report(out, file, &text, &v) {
-                eprintln!("warning: report: {e}");
-            }
-        }
-        Err(e) => eprintln!("warning: report: {e}"),
+    if let Err(e) = crate::report::write_run_report(out, Path::new(&source), &text, &value) {
+        eprintln!("warning: report: {e}");
     }
     if stats.not_converged > 0 {
         eprintln!(

@@ -154,3 +154,59 @@ fn resumed_run_is_bit_identical() {
         "{err}"
     );
 }
+
+/// Track scenarios and presets: a bad field or preset name is one clear error, before any
+/// preparation; the resolved preset reads back as a valid track scenario.
+#[test]
+fn bad_track_input_is_one_clear_error() {
+    let dir = tmp("badtrack");
+    std::fs::create_dir_all(&dir).unwrap();
+    for (text, field) in [
+        ("[track]\nblocks = 0\n", "track.blocks"),
+        ("[track]\nspacing = 0.1\n", "track.spacing"),
+        ("[track]\n[tamping]\nfrequency = -35\n", "tamping.frequency"),
+        ("[track]\n[tamping]\nblocks = [3]\n", "tamping.blocks"),
+        (
+            "[track]\n[ballast]\ngrading = \"10/20\"\n",
+            "ballast.grading",
+        ),
+        (
+            "[track]\n[preparation]\ncompacity = 0.9\n",
+            "preparation.compacity",
+        ),
+        ("[track]\nwidht = 2\n", "widht"),
+    ] {
+        let f = dir.join("t.toml");
+        std::fs::write(&f, text).unwrap();
+        let out = ballast()
+            .args(["run", f.to_str().unwrap(), "--no-cache", "--out"])
+            .arg(dir.join("o"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{text}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(field), "{text}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert_eq!(
+            err.lines().filter(|l| l.starts_with("error")).count(),
+            1,
+            "{err}"
+        );
+    }
+    let out = ballast()
+        .args(["run", "--preset", "nope", "--out"])
+        .arg(dir.join("o"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--preset") && err.contains("default, paper"),
+        "{err}"
+    );
+    for p in ["default", "paper"] {
+        let s = ballast_railway::TrackScenario::preset(p).unwrap();
+        let back = ballast_railway::TrackScenario::from_toml(&s.to_toml()).unwrap();
+        assert_eq!(back, s, "{p}");
+    }
+}

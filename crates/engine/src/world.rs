@@ -178,6 +178,9 @@ impl World {
         let mut lap = Lap::start();
         let mut times = PhaseTimes::default();
 
+        // Driven bodies whose release time has come move freely from this step on.
+        self.bodies.apply_releases(self.time);
+
         // 1. Detection at qᵢ and warm start.
         std::mem::swap(&mut self.previous, &mut self.contacts);
         self.detector
@@ -216,7 +219,11 @@ impl World {
                 SolverBody {
                     v,
                     w,
-                    inv_mass: b.inv_mass[i],
+                    inv_mass: if b.kind[i] == BodyKind::Dynamic {
+                        b.inv_mass[i]
+                    } else {
+                        0.0
+                    },
                     inv_inertia: b.inv_inertia_world(i),
                 }
             })
@@ -303,15 +310,17 @@ impl World {
                 let q_old = *q;
                 *q = (DQuat::from_scaled_axis(rot) * q_old).normalize();
                 *v = v1;
+                let world_inertia = |q: DQuat, d: DVec3| {
+                    let r = DMat3::from_quat(q);
+                    r * DMat3::from_diagonal(d) * r.transpose()
+                };
                 if kind[i] == BodyKind::Dynamic {
-                    let world_inertia = |q: DQuat, d: DVec3| {
-                        let r = DMat3::from_quat(q);
-                        r * DMat3::from_diagonal(d) * r.transpose()
-                    };
                     *l += world_inertia(q_old, inertia[i]) * (w1 - free_w[i]);
                     *w = world_inertia(*q, inertia[i].recip()) * *l;
                 } else {
+                    // Driven: L = I_w ω, so that a release needs no state change.
                     *w = w1;
+                    *l = world_inertia(*q, inertia[i]) * w1;
                 }
             });
         self.time += h;

@@ -184,6 +184,10 @@ pub struct Driver {
     pub wy: Profile,
     #[serde(default)]
     pub wz: Profile,
+    /// Time (s) from which the body is no longer driven: it becomes dynamic, with the mass and
+    /// inertia it was given, and keeps the velocity it had. `None`: driven for ever.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub release_at: Option<f64>,
 }
 
 impl Driver {
@@ -207,8 +211,18 @@ impl Driver {
         )
     }
 
+    /// True when the body is free (dynamic) at time `t`.
+    pub fn released(&self, t: f64) -> bool {
+        self.release_at.is_some_and(|r| t >= r)
+    }
+
     /// Checks every term; the error names the degree of freedom and the term index.
     pub fn validate(&self) -> Result<(), String> {
+        if let Some(r) = self.release_at {
+            if !r.is_finite() {
+                return Err(format!("release_at = {r} must be a finite time (s)"));
+            }
+        }
         for (name, p) in self.dofs() {
             for (k, term) in p.iter().enumerate() {
                 term.validate().map_err(|e| format!("{name}[{k}]: {e}"))?;

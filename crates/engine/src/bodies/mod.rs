@@ -10,7 +10,7 @@ pub mod driver;
 pub use driver::{Driver, Profile, Term};
 
 use crate::math::{DMat3, DQuat, DVec3};
-use crate::shapes::{PolyhedronBuild, Shape};
+use crate::shapes::{ConvexPolyhedron, PolyhedronBuild, Shape};
 use std::sync::Arc;
 
 /// How a body moves.
@@ -41,7 +41,8 @@ pub struct BodySet {
     pub angular_velocity: Vec<DVec3>,
     /// World-frame angular momentum about the centre of mass (dynamic bodies).
     pub angular_momentum: Vec<DVec3>,
-    /// 1/m, zero for kinematic and fixed bodies.
+    /// 1/m; zero for fixed bodies. Kinematic bodies carry the mass they have once released
+    /// (see [`Driver::release_at`]); the solver treats them as infinitely heavy while driven.
     pub inv_mass: Vec<f64>,
     /// Principal moments of inertia (kg m²) about the body axes.
     pub inertia: Vec<DVec3>,
@@ -68,19 +69,41 @@ impl BodySet {
         kind: BodyKind,
         group: u32,
     ) -> usize {
-        let mass = density * build.shape.volume;
-        let inertia = build.shape.unit_inertia * density;
-        let inv_mass = if kind == BodyKind::Dynamic {
-            1.0 / mass
-        } else {
+        self.add_shared_polyhedron(
+            Arc::new(build.shape),
+            build.position,
+            build.orientation,
+            density,
+            kind,
+            group,
+        )
+    }
+
+    /// Adds a polyhedron whose shape may be shared with other bodies (or with a cache), placed
+    /// with its centre of mass at `position`, rotated by `orientation`; returns its index.
+    pub fn add_shared_polyhedron(
+        &mut self,
+        shape: Arc<ConvexPolyhedron>,
+        position: DVec3,
+        orientation: DQuat,
+        density: f64,
+        kind: BodyKind,
+        group: u32,
+    ) -> usize {
+        let mass = density * shape.volume;
+        let inertia = shape.unit_inertia * density;
+        // Kinematic bodies carry their mass too: they may be released (see `Driver::release_at`).
+        let inv_mass = if kind == BodyKind::Fixed {
             0.0
+        } else {
+            1.0 / mass
         };
         self.push(
             kind,
-            Shape::Polyhedron(Arc::new(build.shape)),
+            Shape::Polyhedron(shape),
             group,
-            build.position,
-            build.orientation,
+            position,
+            orientation,
             inv_mass,
             inertia,
         )
@@ -136,7 +159,28 @@ impl BodySet {
         }
     }
 
-    /// Mass of body `i` (infinite for non-dynamic bodies).
+    /// Turns the kinematic bodies whose driver's `release_at` is ≤ `t` into dynamic ones. Their
+    /// angular momentum is already `I_w ω` (the update keeps it so for driven bodies), so this
+    /// only changes the kind and is idempotent: a resumed run calls it again bit-identically.
+    pub fn apply_releases(&mut self, t: f64) {
+        for i in 0..self.len() {
+            if self.kind[i] == BodyKind::Kinematic
+                && self.driver[i].as_ref().is_some_and(|d| d.released(t))
+            {
+                self.kind[i] = BodyKind::Dynamic;
+            }
+        }
+    }
+
+    /// The kind body `i` was created with: a released body reports `Kinematic`.
+    pub fn scene_kind(&self, i: usize) -> BodyKind {
+        match (&self.driver[i], self.kind[i]) {
+            (Some(d), BodyKind::Dynamic) if d.release_at.is_some() => BodyKind::Kinematic,
+            (_, k) => k,
+        }
+    }
+
+    /// Mass of body `i` (infinite for fixed bodies and planes).
     pub fn mass(&self, i: usize) -> f64 {
         1.0 / self.inv_mass[i]
     }

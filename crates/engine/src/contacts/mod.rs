@@ -59,6 +59,29 @@ impl ContactSet {
         n * r.x + t * r.y + s * r.z
     }
 
+    /// Total contact impulse (world frame, N·s) received by each of `bodies` over the last step:
+    /// `+r` for body 2 of a contact, `−r` for body 1. Divided by the time step it is the mean
+    /// contact force. One pass over the contacts; `bodies` is meant to be short (tines, blocks).
+    pub fn impulses_on(&self, bodies: &[u32]) -> Vec<DVec3> {
+        let mut out = vec![DVec3::ZERO; bodies.len()];
+        for k in 0..self.len() {
+            let (a, b) = (self.body1[k], self.body2[k]);
+            let ia = bodies.iter().position(|&x| x == a);
+            let ib = bodies.iter().position(|&x| x == b);
+            if ia.is_none() && ib.is_none() {
+                continue;
+            }
+            let r = self.world_impulse(k);
+            if let Some(i) = ia {
+                out[i] -= r;
+            }
+            if let Some(i) = ib {
+                out[i] += r;
+            }
+        }
+        out
+    }
+
     /// Unordered pair key of contact `k`.
     fn key(&self, k: usize) -> (u32, u32) {
         let (a, b) = (self.body1[k], self.body2[k]);

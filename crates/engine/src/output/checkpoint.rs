@@ -391,7 +391,7 @@ impl Scene {
         let b = &world.bodies;
         let bodies = (0..b.len())
             .map(|i| BodyRecord {
-                kind: kind_code(b.kind[i]),
+                kind: kind_code(b.scene_kind(i)),
                 group: b.group[i],
                 inv_mass: b.inv_mass[i].to_bits(),
                 inertia: b.inertia[i].to_array().map(f64::to_bits),
@@ -935,6 +935,11 @@ fn apply(d: Decoded, path: &Path, world: &mut World) -> Result<Option<RunStats>,
     world.contacts = d.contacts;
     world.time = d.time;
     world.step_index = d.step_index;
+    // Released bodies follow the checkpoint's clock, whichever world reads it.
+    for i in 0..world.bodies.len() {
+        world.bodies.kind[i] = world.bodies.scene_kind(i);
+    }
+    world.bodies.apply_releases(world.time);
     world.timers = d.timers;
     Ok(d.stats)
 }

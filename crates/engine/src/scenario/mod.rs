@@ -502,8 +502,12 @@ impl Scenario {
                 ),
                 _ => {
                     let shape = self.build_shape(k, b)?;
+                    let released = b.driver.as_ref().is_some_and(|d| d.release_at.is_some());
                     let density = match b.kind {
                         BodyKind::Dynamic => {
+                            self.density(&format!("body[{k}]"), b.material.as_ref())?
+                        }
+                        BodyKind::Kinematic if released => {
                             self.density(&format!("body[{k}]"), b.material.as_ref())?
                         }
                         _ => 1.0,

@@ -1,0 +1,122 @@
+//! Track indicators, one value per column of `series.csv`:
+//!
+//! * `compacity_under_block_K`: solid fraction of the ballast in the control volume under
+//!   block K (its footprint, from `depth` below the design soffit up to it), exact by clipping;
+//! * `compacity_crib_K`: the same in crib K (0 = before block 1, between blocks K and K+1,
+//!   over the block width, from soffit to top level);
+//! * `block_z_K_m`: height of block K's centre (m);
+//! * `tine_force_J_x_N`, `tine_force_J_z_N`: force of the ballast on tine J (blade + shaft),
+//!   along the track and vertical, the mean over the last step (contact impulses / h);
+//! * `coordination`: mean number of grain–grain contacts per grain (pairs carrying a
+//!   compressive normal impulse, counted once however many contact points they have).
+
+use crate::compacity::solid_volume;
+use crate::scene::Layout;
+use crate::track::{Aabb, TrackSpec};
+use ballast_engine::world::World;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// The indicators of one track model.
+#[derive(Clone, Debug)]
+pub struct Indicators {
+    names: Vec<String>,
+    volumes: Vec<Aabb>,
+    blocks: Vec<usize>,
+    tines: Vec<[usize; 2]>,
+    grains: Range<usize>,
+}
+
+impl Indicators {
+    /// The indicators of `track` built with `layout`; `depth` is the height of the control
+    /// volumes under the blocks (m).
+    pub fn new(track: &TrackSpec, layout: &Layout, depth: f64) -> Self {
+        let mut names = Vec::new();
+        let mut volumes = Vec::new();
+        for k in 1..=track.blocks {
+            names.push(format!("compacity_under_block_{k}"));
+            volumes.push(track.under_block(k, depth));
+        }
+        for k in 0..=track.blocks {
+            if let Some(c) = track.crib(k) {
+                names.push(format!("compacity_crib_{k}"));
+                volumes.push(c);
+            }
+        }
+        let blocks: Vec<usize> = layout.blocks.clone().collect();
+        for k in 1..=blocks.len() {
+            names.push(format!("block_z_{k}_m"));
+        }
+        for j in 1..=layout.tines.len() {
+            names.push(format!("tine_force_{j}_x_N"));
+            names.push(format!("tine_force_{j}_z_N"));
+        }
+        names.push("coordination".into());
+        Indicators {
+            names,
+            volumes,
+            blocks,
+            tines: layout.tines.clone(),
+            grains: layout.grains.clone(),
+        }
+    }
+
+    /// Column names.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The control volumes, in column order (under blocks, then cribs).
+    pub fn volumes(&self) -> &[Aabb] {
+        &self.volumes
+    }
+
+    /// Values for the current state of `world`, in column order.
+    pub fn values(&self, world: &World) -> Vec<f64> {
+        let b = &world.bodies;
+        let g = &self.grains;
+        let mut out: Vec<f64> = self
+            .volumes
+            .par_iter()
+            .map(|v| solid_volume(b, |i| g.contains(&i), v.min, v.max) / v.volume())
+            .collect();
+        out.extend(self.blocks.iter().map(|&i| b.position[i].z));
+        let ids: Vec<u32> = self.tines.iter().flatten().map(|&i| i as u32).collect();
+        let impulses = world.contacts.impulses_on(&ids);
+        let h = world.settings.dt;
+        for pair in impulses.chunks(2) {
+            let f = (pair[0] + pair[1]) / h;
+            out.push(f.x);
+            out.push(f.z);
+        }
+        out.push(self.coordination(world));
+        out
+    }
+
+    /// Mean number of grain–grain contacts per grain.
+    pub fn coordination(&self, world: &World) -> f64 {
+        let c = &world.contacts;
+        let n = self.grains.len();
+        if n == 0 {
+            return 0.0;
+        }
+        // Contacts are grouped by pair (sorted by unordered pair): count distinct loaded pairs.
+        let mut pairs = 0usize;
+        let mut last = (u32::MAX, u32::MAX);
+        for k in 0..c.len() {
+            let (a, b) = (c.body1[k], c.body2[k]);
+            if !(self.grains.contains(&(a as usize)) && self.grains.contains(&(b as usize))) {
+                continue;
+            }
+            if c.impulse[k].x <= 0.0 {
+                continue;
+            }
+            let key = (a.min(b), a.max(b));
+            if key != last {
+                pairs += 1;
+                last = key;
+            }
+        }
+        2.0 * pairs as f64 / n as f64
+    }
+}

@@ -1,0 +1,595 @@
+//! Sample preparation: a dense ballast bed around the sleeper blocks, deposited under gravity,
+//! and cached on disk keyed by every parameter it depends on.
+//!
+//! # Algorithm
+//!
+//! 1. Generate grains (seeded) for a solid volume `compacity × overfill × bed volume`, the bed
+//!    being the box up to the block tops, blocks included.
+//! 2. Stack them in vertical columns on a square grid over the bed (pitch: the largest grain's
+//!    circumscribed diameter; each grain sits on the previous one of its column by circumscribed
+//!    radii, so no two grains overlap), and let them fall into the empty box with cheap solver
+//!    settings (`dt`, `tolerance`, `max_iterations` below) until the fall time of the column
+//!    plus `settle_time` has passed and the fastest grain is slower than `rest_speed` (waiting
+//!    at most `max_extra_time` more).
+//! 3. Put the blocks in place, as an excavation: remove every grain that overlaps a block
+//!    (exact clipped volume > 0) or whose centre is above the block tops (the cribs are then
+//!    filled to the top of the blocks and the surface is level).
+//! 4. Let the bed settle again, blocks fixed, for `settle_time` and until at rest.
+//!
+//! Every contact of the deposition has the friction coefficient `friction` (0.3 by default):
+//! grains poured with the track's μ = 1 jam into a loose bed (compacity about 0.5), far from
+//! the compacted ballast under a sleeper (about 0.6).
+//!
+//! The blocks are thus put in place rather than pressed in: the soffit rests on the cut surface
+//! of the bed, which the lift of the tamping cycle leaves anyway.
+//!
+//! # Cache
+//!
+//! The result is a list of (grain index in the generated list, pose), stored with the key (the
+//! JSON of every input plus the crate version) in `sample_<hash>.bin`, checksummed and written
+//! atomically. A later run with the same inputs regenerates the grains from their seed (cheap)
+//! and takes the poses from the file: the prepared bed is bit-identical to a fresh preparation.
+
+use crate::compacity::clipped_volume;
+use crate::error::{check_range, FieldError};
+use crate::grains::{generate_grains, Amount, GrainSpec};
+use crate::scene::{build_bodies, Blocks, PlacedGrain, TrackFriction};
+use crate::track::TrackSpec;
+use ballast_engine::math::{DQuat, DVec3};
+use ballast_engine::output::checkpoint::fnv1a64;
+use ballast_engine::output::write_atomic;
+use ballast_engine::shapes::Shape;
+use ballast_engine::solver::{ConvergenceNorm, SolverSettings};
+use ballast_engine::world::{StepSettings, World};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// The ballast: grain shapes, grading, density, and the seed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BallastSpec {
+    #[serde(flatten)]
+    pub grains: GrainSpec,
+    /// Seed of the grain shapes, sizes and orientations.
+    pub seed: u64,
+}
+
+impl Default for BallastSpec {
+    fn default() -> Self {
+        BallastSpec {
+            grains: GrainSpec::default(),
+            seed: 1,
+        }
+    }
+}
+
+/// How the bed is prepared.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PreparationSpec {
+    /// Target solid fraction used to size the grain volume.
+    pub compacity: f64,
+    /// Extra volume of grains, the excess being trimmed above the block tops.
+    pub overfill: f64,
+    /// Time step of the deposition (s).
+    pub dt: f64,
+    /// NLGS tolerance (Quad norm) and sweep cap of the deposition.
+    pub tolerance: f64,
+    pub max_iterations: usize,
+    /// Settling time after the fall, and after the blocks are put in place (s).
+    pub settle_time: f64,
+    /// The bed is at rest when no grain is faster than this (m/s).
+    pub rest_speed: f64,
+    /// Longest wait for rest beyond the minimum time of a stage (s of simulated time).
+    pub max_extra_time: f64,
+    /// Friction coefficient of every contact during the deposition: low friction gives the
+    /// dense beds of a compacted track (the run itself uses `[friction]`).
+    pub friction: f64,
+    /// Reuse a prepared bed with the same parameters from the cache folder.
+    pub cache: bool,
+}
+
+impl Default for PreparationSpec {
+    fn default() -> Self {
+        PreparationSpec {
+            compacity: 0.60,
+            overfill: 1.08,
+            dt: 5e-4,
+            tolerance: 1e-2,
+            max_iterations: 40,
+            settle_time: 0.25,
+            rest_speed: 0.05,
+            max_extra_time: 0.25,
+            friction: 0.3,
+            cache: true,
+        }
+    }
+}
+
+impl PreparationSpec {
+    /// Checks every field.
+    ///
+    /// # Errors
+    ///
+    /// The first invalid field, its value and what is allowed.
+    pub fn validate(&self) -> Result<(), FieldError> {
+        check_range("preparation.compacity", self.compacity, 0.3, 0.74, "")?;
+        check_range("preparation.overfill", self.overfill, 1.0, 2.0, "")?;
+        check_range("preparation.dt", self.dt, 1e-6, 1e-2, "s")?;
+        check_range("preparation.tolerance", self.tolerance, 1e-12, 1.0, "")?;
+        if !(1..=100_000).contains(&self.max_iterations) {
+            return Err(crate::error::refuse(
+                "preparation.max_iterations",
+                self.max_iterations,
+                "1 to 100000 sweeps",
+            ));
+        }
+        check_range("preparation.settle_time", self.settle_time, 0.0, 100.0, "s")?;
+        check_range("preparation.rest_speed", self.rest_speed, 1e-6, 10.0, "m/s")?;
+        check_range(
+            "preparation.max_extra_time",
+            self.max_extra_time,
+            0.0,
+            1000.0,
+            "s",
+        )?;
+        Ok(())
+    }
+}
+
+/// What a preparation did (stored with the cached sample).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PreparationReport {
+    /// Grains generated, and kept in the bed.
+    pub generated: usize,
+    pub grains: usize,
+    /// Grains removed where the blocks go, and above the block tops.
+    pub removed_in_blocks: usize,
+    pub removed_above: usize,
+    /// Deposition steps and simulated time (fall + settling).
+    pub steps: u64,
+    pub simulated_s: f64,
+    /// Wall-clock time of the preparation (s).
+    pub wall_s: f64,
+    /// Largest overlap among the final contacts (m).
+    pub max_penetration: f64,
+    /// Largest and mean grain speed at the end (m/s, rotation included at the circumscribed
+    /// radius).
+    pub max_speed: f64,
+    #[serde(default)]
+    pub mean_speed: f64,
+}
+
+/// A prepared bed: the grains' poses (blocks in their design position).
+#[derive(Clone, Debug)]
+pub struct PreparedSample {
+    pub grains: Vec<PlacedGrain>,
+    pub report: PreparationReport,
+    /// True when it was read from the cache.
+    pub from_cache: bool,
+}
+
+/// Progress of a preparation, for terminals.
+#[derive(Clone, Copy, Debug)]
+pub struct PrepProgress {
+    /// 1 = deposition, 2 = settling around the blocks.
+    pub stage: u8,
+    pub time: f64,
+    /// Time the stage will at least last.
+    pub target: f64,
+    pub grains: usize,
+    pub contacts: usize,
+}
+
+/// Everything the prepared bed depends on.
+#[derive(Serialize)]
+struct Key<'a> {
+    version: &'static str,
+    format: u32,
+    track: &'a TrackSpec,
+    ballast: &'a BallastSpec,
+    preparation: &'a PreparationSpec,
+    friction: &'a TrackFriction,
+}
+
+const MAGIC: &[u8] = b"BALLASTSAMPLE";
+const FORMAT: u32 = 1;
+
+fn key_json(
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
+    friction: &TrackFriction,
+) -> String {
+    // `cache` itself does not change the bed.
+    let prep = PreparationSpec {
+        cache: true,
+        ..prep.clone()
+    };
+    serde_json::to_string(&Key {
+        version: env!("CARGO_PKG_VERSION"),
+        format: FORMAT,
+        track,
+        ballast,
+        preparation: &prep,
+        friction,
+    })
+    .expect("specs serialise")
+}
+
+/// The cache file of these parameters in `dir`.
+pub fn cache_path(
+    dir: &Path,
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
+    friction: &TrackFriction,
+) -> PathBuf {
+    let h = fnv1a64(key_json(track, ballast, prep, friction).as_bytes());
+    dir.join(format!("sample_{h:016x}.bin"))
+}
+
+/// Prepares the bed, or reads it from `cache_dir` when `prep.cache` and a valid file with the
+/// same key is there; a fresh preparation is stored there (a failed write is only a warning,
+/// returned as the second value).
+///
+/// # Errors
+///
+/// Invalid parameters ([`FieldError`]), or grains that cannot be generated.
+pub fn load_or_prepare(
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
+    friction: &TrackFriction,
+    cache_dir: Option<&Path>,
+    progress: &mut dyn FnMut(PrepProgress),
+) -> Result<(PreparedSample, Option<String>), String> {
+    track.validate().map_err(|e| e.to_string())?;
+    ballast.grains.validate().map_err(|e| e.to_string())?;
+    prep.validate().map_err(|e| e.to_string())?;
+    friction.validate().map_err(|e| e.to_string())?;
+    let key = key_json(track, ballast, prep, friction);
+    let path = cache_dir
+        .filter(|_| prep.cache)
+        .map(|d| cache_path(d, track, ballast, prep, friction));
+    let generated = generate(track, ballast, prep)?;
+    if let Some(p) = &path {
+        if let Ok(bytes) = std::fs::read(p) {
+            if let Some(s) = decode(&bytes, &key, &generated) {
+                return Ok((s, None));
+            }
+        }
+    }
+    let sample = prepare_from(track, ballast, prep, generated, progress);
+    let mut warning = None;
+    if let Some(p) = &path {
+        let written = std::fs::create_dir_all(p.parent().unwrap_or(Path::new(".")))
+            .and_then(|_| write_atomic(p, &encode(&sample, &key)));
+        if let Err(e) = written {
+            warning = Some(format!(
+                "could not cache the prepared bed in {}: {e}",
+                p.display()
+            ));
+        }
+    }
+    Ok((sample, warning))
+}
+
+/// The generated grains, in body frame (pose = orientation only).
+fn generate(
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
+) -> Result<Vec<PlacedGrain>, String> {
+    let volume = prep.compacity * prep.overfill * track.bed_box().volume();
+    let builds = generate_grains(&ballast.grains, Amount::SolidVolume(volume), ballast.seed)
+        .map_err(|e| e.to_string())?;
+    Ok(builds
+        .into_iter()
+        .enumerate()
+        .map(|(index, b)| PlacedGrain {
+            index,
+            shape: Arc::new(b.shape),
+            position: b.position,
+            orientation: b.orientation,
+        })
+        .collect())
+}
+
+/// Prepares a bed from scratch (see the [module documentation](self)).
+///
+/// # Errors
+///
+/// Invalid parameters, or grains that cannot be generated.
+pub fn prepare(
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
+    friction: &TrackFriction,
+    progress: &mut dyn FnMut(PrepProgress),
+) -> Result<PreparedSample, String> {
+    load_or_prepare(
+        track,
+        ballast,
+        &PreparationSpec {
+            cache: false,
+            ..prep.clone()
+        },
+        friction,
+        None,
+        progress,
+    )
+    .map(|(s, _)| s)
+}
+
+fn prepare_from(
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
+    mut grains: Vec<PlacedGrain>,
+    progress: &mut dyn FnMut(PrepProgress),
+) -> PreparedSample {
+    let clock = std::time::Instant::now();
+    let generated = grains.len();
+    // Place the grains' (rotated) bounding boxes on a height map, each at the lowest of a few
+    // random spots: boxes never overlap, so grains do not either, and the loose bed is 4–6
+    // times less tall than a lattice of circumscribed spheres.
+    let bed = track.bed_box();
+    let height = place_on_height_map(&mut grains, &bed, ballast.seed);
+    let fall = (2.0 * height / 9.81).sqrt();
+
+    let settings = StepSettings {
+        dt: prep.dt,
+        solver: SolverSettings {
+            tolerance: prep.tolerance,
+            max_iterations: prep.max_iterations,
+            norm: ConvergenceNorm::Quad,
+            ..SolverSettings::default()
+        },
+        ..StepSettings::default()
+    };
+    let density = ballast.grains.density;
+    let mut steps = 0;
+    let mut simulated = 0.0;
+    let mut run = |world: &mut World, stage: u8, min_time: f64| -> (f64, f64) {
+        let n = world.bodies.len();
+        let mut speed = f64::INFINITY;
+        while world.time < min_time
+            || (speed > prep.rest_speed && world.time < min_time + prep.max_extra_time)
+        {
+            let r = world.step();
+            steps += 1;
+            if world.step_index.is_multiple_of(20) {
+                speed = speeds(world).0;
+                progress(PrepProgress {
+                    stage,
+                    time: world.time,
+                    target: min_time,
+                    grains: n,
+                    contacts: r.contacts,
+                });
+            }
+        }
+        simulated += world.time;
+        speeds(world)
+    };
+
+    // Deposition into the empty box.
+    let (bodies, layout) = build_bodies(track, &Blocks::Absent, None, &grains, density);
+    let deposition_friction = TrackFriction {
+        grain_grain: prep.friction,
+        grain_block: prep.friction,
+        grain_tine: prep.friction,
+        grain_wall: prep.friction,
+    };
+    let mut world = World::new(bodies, deposition_friction.table(), settings.clone());
+    run(&mut world, 1, fall + prep.settle_time);
+    for (g, i) in grains.iter_mut().zip(layout.grains.clone()) {
+        g.position = world.bodies.position[i];
+        g.orientation = world.bodies.orientation[i];
+    }
+
+    // Excavate the blocks and trim above the block tops.
+    let top = track.top();
+    let blocks: Vec<_> = (1..=track.blocks).map(|k| track.block_box(k)).collect();
+    let (mut in_blocks, mut above) = (0, 0);
+    grains.retain(|g| {
+        if blocks
+            .iter()
+            .any(|b| clipped_volume(&g.shape, g.position, g.orientation, b.min, b.max) > 0.0)
+        {
+            in_blocks += 1;
+            false
+        } else if g.position.z > top {
+            above += 1;
+            false
+        } else {
+            true
+        }
+    });
+
+    // Settle around the fixed blocks.
+    let (bodies, layout) = build_bodies(track, &Blocks::Fixed, None, &grains, density);
+    let mut world = World::new(bodies, deposition_friction.table(), settings);
+    let (speed, mean_speed) = run(&mut world, 2, prep.settle_time);
+    for (g, i) in grains.iter_mut().zip(layout.grains.clone()) {
+        g.position = world.bodies.position[i];
+        g.orientation = world.bodies.orientation[i];
+    }
+    let max_penetration = world.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g));
+    PreparedSample {
+        report: PreparationReport {
+            generated,
+            grains: grains.len(),
+            removed_in_blocks: in_blocks,
+            removed_above: above,
+            steps,
+            simulated_s: simulated,
+            wall_s: clock.elapsed().as_secs_f64(),
+            max_penetration,
+            max_speed: speed,
+            mean_speed,
+        },
+        grains,
+        from_cache: false,
+    }
+}
+
+/// Cell of the height map (m).
+const MAP_CELL: f64 = 5e-3;
+/// Random spots tried per grain; the lowest wins.
+const SPOTS: usize = 4;
+
+/// Places `grains` (orientations kept) by dropping their world boxes onto a height map of the
+/// bed's floor, each at the lowest of [`SPOTS`] seeded random spots; returns the top height.
+fn place_on_height_map(grains: &mut [PlacedGrain], bed: &crate::track::Aabb, seed: u64) -> f64 {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x6265_645f_6d61_7000);
+    let nx = ((bed.max.x - bed.min.x) / MAP_CELL).ceil() as usize;
+    let ny = ((bed.max.y - bed.min.y) / MAP_CELL).ceil() as usize;
+    let mut map = vec![0.0f64; nx * ny];
+    let mut top = 0.0f64;
+    for g in grains.iter_mut() {
+        let (lo, hi) = g.shape.vertices.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), &v| {
+                let w = g.orientation * v;
+                (lo.min(w), hi.max(w))
+            },
+        );
+        let size = hi - lo;
+        // Cells covered by a box whose low corner is at cell (i, j).
+        let (cx, cy) = (
+            ((size.x / MAP_CELL).ceil() as usize + 1).min(nx),
+            ((size.y / MAP_CELL).ceil() as usize + 1).min(ny),
+        );
+        let mut best = (f64::INFINITY, 0, 0);
+        for _ in 0..SPOTS {
+            let i = rng.gen_range(0..=nx - cx);
+            let j = rng.gen_range(0..=ny - cy);
+            let floor = (j..j + cy)
+                .flat_map(|b| map[b * nx + i..b * nx + i + cx].iter())
+                .copied()
+                .fold(0.0, f64::max);
+            if floor < best.0 {
+                best = (floor, i, j);
+            }
+        }
+        let (floor, i, j) = best;
+        let z0 = floor + 1e-3;
+        // Box low corner at the cell corner, kept inside the walls.
+        let x0 = (bed.min.x + i as f64 * MAP_CELL).min(bed.max.x - size.x - 1e-4);
+        let y0 = (bed.min.y + j as f64 * MAP_CELL).min(bed.max.y - size.y - 1e-4);
+        g.position = DVec3::new(x0 - lo.x, y0 - lo.y, z0 - lo.z);
+        let z1 = z0 + size.z;
+        top = top.max(z1);
+        for b in j..j + cy {
+            for c in &mut map[b * nx + i..b * nx + i + cx] {
+                *c = z1;
+            }
+        }
+    }
+    top
+}
+
+/// Largest and mean speed of the dynamic bodies (m/s), rotation included through the
+/// circumscribed radius.
+fn speeds(world: &World) -> (f64, f64) {
+    let b = &world.bodies;
+    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
+    for i in 0..b.len() {
+        if b.kind[i] != ballast_engine::bodies::BodyKind::Dynamic {
+            continue;
+        }
+        let r = match &b.shape[i] {
+            Shape::Polyhedron(p) => p.radius,
+            Shape::Plane { .. } => 0.0,
+        };
+        let v = b.velocity[i].length() + b.angular_velocity[i].length() * r;
+        max = max.max(v);
+        sum += v;
+        n += 1;
+    }
+    (max, sum / n.max(1) as f64)
+}
+
+/// The cache file: magic, format, key, report (JSON), then per kept grain its index in the
+/// generated list and its pose (exact bits), and an FNV-1a checksum of all that.
+fn encode(sample: &PreparedSample, key: &str) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&FORMAT.to_le_bytes());
+    out.extend_from_slice(&(key.len() as u64).to_le_bytes());
+    out.extend_from_slice(key.as_bytes());
+    let report = serde_json::to_string(&sample.report).expect("report serialises");
+    out.extend_from_slice(&(report.len() as u64).to_le_bytes());
+    out.extend_from_slice(report.as_bytes());
+    out.extend_from_slice(&(sample.grains.len() as u64).to_le_bytes());
+    for g in &sample.grains {
+        out.extend_from_slice(&(g.index as u32).to_le_bytes());
+        for v in g.position.to_array() {
+            out.extend_from_slice(&v.to_bits().to_le_bytes());
+        }
+        for v in g.orientation.to_array() {
+            out.extend_from_slice(&v.to_bits().to_le_bytes());
+        }
+    }
+    let sum = fnv1a64(&out);
+    out.extend_from_slice(&sum.to_le_bytes());
+    out
+}
+
+/// Reads a cached sample; `None` if anything is off (the bed is then prepared again).
+fn decode(bytes: &[u8], key: &str, generated: &[PlacedGrain]) -> Option<PreparedSample> {
+    let n = bytes.len();
+    if n < MAGIC.len() + 8 {
+        return None;
+    }
+    let (body, sum) = bytes.split_at(n - 8);
+    if fnv1a64(body) != u64::from_le_bytes(sum.try_into().ok()?) {
+        return None;
+    }
+    let mut d = body.strip_prefix(MAGIC)?;
+    let mut take = |k: usize| -> Option<&[u8]> {
+        if d.len() < k {
+            return None;
+        }
+        let (a, b) = d.split_at(k);
+        d = b;
+        Some(a)
+    };
+    let format = u32::from_le_bytes(take(4)?.try_into().ok()?);
+    if format != FORMAT {
+        return None;
+    }
+    let klen = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
+    if take(klen)? != key.as_bytes() {
+        return None;
+    }
+    let rlen = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
+    let report: PreparationReport = serde_json::from_slice(take(rlen)?).ok()?;
+    let count = u64::from_le_bytes(take(8)?.try_into().ok()?) as usize;
+    if count > generated.len() {
+        return None;
+    }
+    let mut grains = Vec::with_capacity(count);
+    let f = |b: &[u8]| f64::from_bits(u64::from_le_bytes(b.try_into().unwrap()));
+    for _ in 0..count {
+        let index = u32::from_le_bytes(take(4)?.try_into().ok()?) as usize;
+        let g = generated.get(index)?;
+        let p = take(24)?;
+        let q = take(32)?;
+        grains.push(PlacedGrain {
+            index,
+            shape: g.shape.clone(),
+            position: DVec3::new(f(&p[0..8]), f(&p[8..16]), f(&p[16..24])),
+            orientation: DQuat::from_xyzw(f(&q[0..8]), f(&q[8..16]), f(&q[16..24]), f(&q[24..32])),
+        });
+    }
+    Some(PreparedSample {
+        grains,
+        report,
+        from_cache: true,
+    })
+}

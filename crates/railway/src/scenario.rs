@@ -1,0 +1,440 @@
+//! Track scenarios (TOML with a `[track]` table) and the presets `default` and `paper`.
+//!
+//! ```toml
+//! [simulation]          # all optional
+//! dt = 2e-4             # s
+//! steps = 8820          # default: the whole cycle, tamping.duration / dt
+//! output_interval = 50  # steps between rows of series.csv
+//! vtk_interval = 250    # steps between ParaView frames (0 = none)
+//! checkpoint_interval = 1000
+//!
+//! [track]               # see TrackSpec
+//! blocks = 1
+//! block_size = [0.29, 0.84, 0.22]
+//! spacing = 0.6
+//! depth = 0.30
+//! width = 1.0
+//!
+//! [ballast]             # see GrainSpec: grading, vertices, elongation, flatness, density
+//! grading = "31.5/50"   # or "25/50", or { sieves_mm = [...], passing = [...] }
+//! seed = 1
+//!
+//! [preparation]         # see PreparationSpec
+//! [tamping]             # see TampingSpec
+//! [friction]            # grain_grain, grain_block, grain_tine, grain_wall
+//! [indicators]
+//! depth = 0.10          # height of the control volumes under the blocks (m)
+//! [solver]              # as in engine scenarios
+//! [correction]
+//! [ddm]
+//! ```
+
+use crate::error::{check_range, refuse, FieldError};
+use crate::grading::GradingCurve;
+use crate::grains::GrainSpec;
+use crate::indicators::Indicators;
+use crate::preparation::{
+    load_or_prepare, BallastSpec, PrepProgress, PreparationReport, PreparationSpec,
+};
+use crate::scene::{build_bodies, Blocks, Layout, TrackFriction};
+use crate::tamping::{Cycle, TampingSpec};
+use crate::track::TrackSpec;
+use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, DdmSettings, SolverSettings};
+use ballast_engine::world::{StepSettings, World};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// `[simulation]` of a track scenario.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackSimulation {
+    pub dt: f64,
+    pub theta: f64,
+    pub alert: f64,
+    /// Steps to run; `None` = the whole cycle.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub steps: Option<u64>,
+    pub output_interval: u64,
+    pub vtk_interval: u64,
+    pub checkpoint_interval: u64,
+}
+
+impl Default for TrackSimulation {
+    fn default() -> Self {
+        TrackSimulation {
+            dt: 2e-4,
+            theta: 0.5,
+            alert: 1e-3,
+            steps: None,
+            output_interval: 50,
+            vtk_interval: 250,
+            checkpoint_interval: 1000,
+        }
+    }
+}
+
+/// `[indicators]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct IndicatorSpec {
+    /// Height of the control volumes under the blocks (m).
+    pub depth: f64,
+}
+
+impl Default for IndicatorSpec {
+    fn default() -> Self {
+        IndicatorSpec { depth: 0.10 }
+    }
+}
+
+/// The grading as written in a file: a standard's name or a sieve table.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+enum GradingInput {
+    Named(String),
+    Table(GradingCurve),
+}
+
+/// `[ballast]` as written in a file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BallastInput {
+    #[serde(default)]
+    grading: Option<GradingInput>,
+    #[serde(default)]
+    vertices: Option<[usize; 2]>,
+    #[serde(default)]
+    elongation: Option<f64>,
+    #[serde(default)]
+    flatness: Option<f64>,
+    #[serde(default)]
+    density: Option<f64>,
+    #[serde(default)]
+    seed: Option<u64>,
+}
+
+/// A whole track scenario.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackScenario {
+    pub simulation: TrackSimulation,
+    pub track: TrackSpec,
+    pub ballast: BallastSpec,
+    pub preparation: PreparationSpec,
+    pub tamping: TampingSpec,
+    pub friction: TrackFriction,
+    pub indicators: IndicatorSpec,
+    pub solver: SolverSettings,
+    pub correction: CorrectionSettings,
+    pub ddm: Option<DdmSettings>,
+}
+
+/// The file form of [`TrackScenario`].
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TrackFile {
+    #[serde(default)]
+    simulation: TrackSimulation,
+    track: TrackSpec,
+    #[serde(default)]
+    ballast: Option<BallastInput>,
+    #[serde(default)]
+    preparation: PreparationSpec,
+    #[serde(default)]
+    tamping: TampingSpec,
+    #[serde(default)]
+    friction: TrackFriction,
+    #[serde(default)]
+    indicators: IndicatorSpec,
+    #[serde(default = "track_solver")]
+    solver: SolverSettings,
+    #[serde(default)]
+    correction: CorrectionSettings,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    ddm: Option<DdmSettings>,
+}
+
+/// Solver defaults of track runs: the Quad norm at 1e-3, at most 300 sweeps.
+fn track_solver() -> SolverSettings {
+    SolverSettings {
+        tolerance: 1e-3,
+        max_iterations: 300,
+        norm: ConvergenceNorm::Quad,
+        ..SolverSettings::default()
+    }
+}
+
+/// True when a scenario text is a track scenario (it has a `[track]` table).
+pub fn is_track_scenario(text: &str) -> bool {
+    text.parse::<toml::Table>()
+        .map(|t| t.contains_key("track"))
+        .unwrap_or(false)
+}
+
+impl TrackScenario {
+    /// The default job: one block and its 4 tines through the paper's cycle (T = 1.764 s,
+    /// dt = 2e-4 s, 8820 steps), preparation included.
+    pub fn default_preset() -> Self {
+        TrackScenario {
+            simulation: TrackSimulation::default(),
+            track: TrackSpec::default(),
+            ballast: BallastSpec::default(),
+            preparation: PreparationSpec::default(),
+            tamping: TampingSpec::default(),
+            friction: TrackFriction::default(),
+            indicators: IndicatorSpec::default(),
+            solver: track_solver(),
+            correction: CorrectionSettings::default(),
+            ddm: None,
+        }
+    }
+
+    /// The paper's case: 7 blocks on a 3.6 m × 2 m × 0.56 m bed (0.514 m spacing, the paper's
+    /// length for 7 blocks; 0.34 m of ballast under the soffits), tamping of the 4th block,
+    /// dt = 2e-4 s, μ = 1 (0.8 against walls), DDM 1×7×1 with n = m = 1, at most 740 sweeps.
+    pub fn paper_preset() -> Self {
+        let mut s = Self::default_preset();
+        s.track = TrackSpec {
+            blocks: 7,
+            spacing: 3.6 / 7.0,
+            depth: 0.34,
+            width: 2.0,
+            ..TrackSpec::default()
+        };
+        s.tamping.blocks = vec![4];
+        s.solver.max_iterations = 740;
+        s.ddm = Some(DdmSettings {
+            subdomains: [1, 7, 1],
+            ..DdmSettings::default()
+        });
+        // Bigger bed: lighter outputs.
+        s.simulation.vtk_interval = 500;
+        s
+    }
+
+    /// A preset by name.
+    ///
+    /// # Errors
+    ///
+    /// An unknown name, with the known ones.
+    pub fn preset(name: &str) -> Result<Self, FieldError> {
+        match name {
+            "default" => Ok(Self::default_preset()),
+            "paper" => Ok(Self::paper_preset()),
+            _ => Err(refuse("--preset", name, "one of: default, paper")),
+        }
+    }
+
+    /// Parses and validates a track scenario.
+    ///
+    /// # Errors
+    ///
+    /// TOML syntax or unknown fields (with the line), or the first invalid field.
+    pub fn from_toml(text: &str) -> Result<Self, String> {
+        let f: TrackFile = toml::from_str(text).map_err(|e| e.to_string())?;
+        let mut grains = GrainSpec::default();
+        let mut seed = BallastSpec::default().seed;
+        if let Some(b) = f.ballast {
+            if let Some(g) = b.grading {
+                grains.grading = match g {
+                    GradingInput::Table(c) => c,
+                    GradingInput::Named(n) => match n.as_str() {
+                        "31.5/50" => GradingCurve::en13450_31_5_50(),
+                        "25/50" => GradingCurve::en13450_25_50(),
+                        _ => {
+                            return Err(refuse(
+                                "ballast.grading",
+                                n,
+                                "\"31.5/50\", \"25/50\" or a table { sieves_mm = [...], passing = [...] }",
+                            )
+                            .to_string())
+                        }
+                    },
+                };
+            }
+            grains.vertices = b.vertices.unwrap_or(grains.vertices);
+            grains.elongation = b.elongation.unwrap_or(grains.elongation);
+            grains.flatness = b.flatness.unwrap_or(grains.flatness);
+            grains.density = b.density.unwrap_or(grains.density);
+            seed = b.seed.unwrap_or(seed);
+        }
+        let s = TrackScenario {
+            simulation: f.simulation,
+            track: f.track,
+            ballast: BallastSpec { grains, seed },
+            preparation: f.preparation,
+            tamping: f.tamping,
+            friction: f.friction,
+            indicators: f.indicators,
+            solver: f.solver,
+            correction: f.correction,
+            ddm: f.ddm,
+        };
+        s.validate()?;
+        Ok(s)
+    }
+
+    /// The scenario as a TOML file (what [`TrackScenario::from_toml`] reads back).
+    pub fn to_toml(&self) -> String {
+        #[derive(Serialize)]
+        struct Out<'a> {
+            simulation: &'a TrackSimulation,
+            track: &'a TrackSpec,
+            ballast: BallastOut<'a>,
+            preparation: &'a PreparationSpec,
+            tamping: &'a TampingSpec,
+            friction: &'a TrackFriction,
+            indicators: &'a IndicatorSpec,
+            solver: &'a SolverSettings,
+            correction: &'a CorrectionSettings,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            ddm: Option<&'a DdmSettings>,
+        }
+        #[derive(Serialize)]
+        struct BallastOut<'a> {
+            seed: u64,
+            vertices: [usize; 2],
+            elongation: f64,
+            flatness: f64,
+            density: f64,
+            grading: &'a GradingCurve,
+        }
+        let g = &self.ballast.grains;
+        toml::to_string(&Out {
+            simulation: &self.simulation,
+            track: &self.track,
+            ballast: BallastOut {
+                seed: self.ballast.seed,
+                vertices: g.vertices,
+                elongation: g.elongation,
+                flatness: g.flatness,
+                density: g.density,
+                grading: &g.grading,
+            },
+            preparation: &self.preparation,
+            tamping: &self.tamping,
+            friction: &self.friction,
+            indicators: &self.indicators,
+            solver: &self.solver,
+            correction: &self.correction,
+            ddm: self.ddm.as_ref(),
+        })
+        .expect("scenario serialises")
+    }
+
+    /// Checks every field.
+    ///
+    /// # Errors
+    ///
+    /// The first invalid field, its value and what is allowed.
+    pub fn validate(&self) -> Result<(), String> {
+        let s = &self.simulation;
+        check_range("simulation.dt", s.dt, 1e-7, 1e-2, "s").map_err(|e| e.to_string())?;
+        check_range("simulation.theta", s.theta, 0.5, 1.0, "").map_err(|e| e.to_string())?;
+        check_range("simulation.alert", s.alert, 0.0, 0.1, "m").map_err(|e| e.to_string())?;
+        if s.output_interval == 0 {
+            return Err(refuse("simulation.output_interval", 0, "≥ 1 step").to_string());
+        }
+        if s.steps == Some(0) {
+            return Err(refuse(
+                "simulation.steps",
+                0,
+                "≥ 1 step (or absent: the whole cycle)",
+            )
+            .to_string());
+        }
+        self.track.validate().map_err(|e| e.to_string())?;
+        self.ballast.grains.validate().map_err(|e| e.to_string())?;
+        self.preparation.validate().map_err(|e| e.to_string())?;
+        self.tamping
+            .validate(&self.track)
+            .map_err(|e| e.to_string())?;
+        self.friction.validate().map_err(|e| e.to_string())?;
+        check_range(
+            "indicators.depth",
+            self.indicators.depth,
+            1e-3,
+            self.track.depth,
+            "m",
+        )
+        .map_err(|e| e.to_string())?;
+        self.solver.validate()?;
+        self.correction.validate()?;
+        if let Some(d) = &self.ddm {
+            d.validate()?;
+        }
+        Ok(())
+    }
+
+    /// Steps of the run: `simulation.steps`, or the whole cycle.
+    pub fn steps(&self) -> u64 {
+        self.simulation
+            .steps
+            .unwrap_or_else(|| (self.tamping.duration() / self.simulation.dt).round() as u64)
+    }
+
+    /// The engine's step settings.
+    pub fn step_settings(&self) -> StepSettings {
+        StepSettings {
+            dt: self.simulation.dt,
+            theta: self.simulation.theta,
+            alert: self.simulation.alert,
+            solver: self.solver.clone(),
+            correction: self.correction.clone(),
+            ddm: self.ddm.clone(),
+            ..StepSettings::default()
+        }
+    }
+
+    /// Prepares the bed (or reads it from `cache_dir`) and builds the tamping world at t = 0.
+    ///
+    /// # Errors
+    ///
+    /// Invalid parameters, or grains that cannot be generated.
+    pub fn build(
+        &self,
+        cache_dir: Option<&Path>,
+        progress: &mut dyn FnMut(PrepProgress),
+    ) -> Result<TrackModel, String> {
+        self.validate()?;
+        let (sample, warning) = load_or_prepare(
+            &self.track,
+            &self.ballast,
+            &self.preparation,
+            &self.friction,
+            cache_dir,
+            progress,
+        )?;
+        let cycle = self.tamping.build(&self.track);
+        let (bodies, layout) = build_bodies(
+            &self.track,
+            &Blocks::Driven(cycle.block_driver.clone()),
+            Some(&cycle),
+            &sample.grains,
+            self.ballast.grains.density,
+        );
+        let indicators = Indicators::new(&self.track, &layout, self.indicators.depth);
+        let world = World::new(bodies, self.friction.table(), self.step_settings());
+        Ok(TrackModel {
+            world,
+            layout,
+            cycle,
+            indicators,
+            preparation: sample.report,
+            from_cache: sample.from_cache,
+            cache_warning: warning,
+        })
+    }
+}
+
+/// A built track model, ready to run.
+pub struct TrackModel {
+    pub world: World,
+    pub layout: Layout,
+    pub cycle: Cycle,
+    pub indicators: Indicators,
+    pub preparation: PreparationReport,
+    /// The bed came from the cache.
+    pub from_cache: bool,
+    /// Set when the prepared bed could not be cached.
+    pub cache_warning: Option<String>,
+}

@@ -1,0 +1,207 @@
+//! End-to-end track model on a CI-sized bed: preparation (dense, clean, cached bit-identically)
+//! and a full tamping cycle that compacts the ballast under the tamped block.
+
+use ballast_engine::math::DVec3;
+use ballast_railway::compacity::compacity;
+use ballast_railway::preparation::{load_or_prepare, PreparedSample};
+use ballast_railway::scenario::TrackScenario;
+use ballast_railway::track::TrackSpec;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+/// A small track: a block of 0.14 × 0.28 × 0.10 m on 0.12 m of ballast, 0.32 m spacing, in a
+/// 0.40 m wide bed; 31.5/50 ballast with 8–12 vertices (cheaper contacts); tines scaled to
+/// the block; coarser steps (4e-4 s).
+fn mini() -> TrackScenario {
+    let mut s = TrackScenario::default_preset();
+    s.track = TrackSpec {
+        blocks: 1,
+        block_size: [0.14, 0.28, 0.10],
+        spacing: 0.32,
+        depth: 0.12,
+        width: 0.40,
+        ..TrackSpec::default()
+    };
+    s.ballast.grains.vertices = [8, 12];
+    s.ballast.seed = 7;
+    let t = &mut s.tamping;
+    t.blade = [0.015, 0.05, 0.05];
+    t.shaft = [0.02, 0.02];
+    t.tine_y = vec![-0.07, 0.07];
+    t.open_gap = 0.05;
+    t.squeeze = 0.035;
+    t.lift = 0.015;
+    t.depth_below_soffit = 0.015;
+    s.simulation.dt = 4e-4;
+    s.simulation.vtk_interval = 0;
+    s.solver.max_iterations = 200;
+    s.indicators.depth = 0.05;
+    s.validate().unwrap();
+    s
+}
+
+fn cache_dir() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ballast-tamping-test-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The mini bed, prepared once for all tests of this file (through the cache).
+fn prepared() -> &'static PreparedSample {
+    static BED: OnceLock<PreparedSample> = OnceLock::new();
+    BED.get_or_init(|| {
+        let s = mini();
+        let (bed, warning) = load_or_prepare(
+            &s.track,
+            &s.ballast,
+            &s.preparation,
+            &s.friction,
+            Some(&cache_dir()),
+            &mut |_| {},
+        )
+        .unwrap();
+        assert!(warning.is_none(), "{warning:?}");
+        bed
+    })
+}
+
+#[test]
+fn prepared_bed_is_dense_level_and_clean() {
+    let s = mini();
+    let bed = prepared();
+    let r = &bed.report;
+    eprintln!("{r:?}");
+    assert!(r.grains > 200, "{} grains", r.grains);
+    assert!(r.removed_in_blocks > 0 && r.removed_above > 0);
+    // Overlaps within the tolerance of the deposition, bed at rest.
+    assert!(r.max_penetration < 2e-3, "overlap {}", r.max_penetration);
+    // At rest but for a few rattlers at the surface.
+    assert!(r.mean_speed < 0.02, "mean speed {}", r.mean_speed);
+    assert!(r.max_speed < 1.0, "max speed {}", r.max_speed);
+    // Level: no grain centre above the block tops; the cribs filled to near the top.
+    let top = s.track.top();
+    let zmax = bed.grains.iter().map(|g| g.position.z).fold(0.0, f64::max);
+    assert!(zmax <= top + 1e-9, "{zmax} > {top}");
+    assert!(zmax > top - 0.03, "cribs filled to {zmax}, top {top}");
+    // Bulk compacity, one grain size away from walls and floor, under the soffit.
+    let (bodies, layout) = ballast_railway::scene::build_bodies(
+        &s.track,
+        &ballast_railway::scene::Blocks::Fixed,
+        None,
+        &bed.grains,
+        2700.0,
+    );
+    let w = s.track.width;
+    let c = compacity(
+        &bodies,
+        |i| layout.grains.contains(&i),
+        DVec3::new(0.04, -0.5 * w + 0.04, 0.02),
+        DVec3::new(
+            s.track.length() - 0.04,
+            0.5 * w - 0.04,
+            s.track.depth - 0.02,
+        ),
+    )
+    .unwrap();
+    eprintln!("bulk compacity {c}");
+    assert!((0.55..=0.65).contains(&c), "bulk compacity {c}");
+}
+
+#[test]
+fn cached_bed_is_bit_identical() {
+    let s = mini();
+    let first = prepared();
+    let (again, _) = load_or_prepare(
+        &s.track,
+        &s.ballast,
+        &s.preparation,
+        &s.friction,
+        Some(&cache_dir()),
+        &mut |_| panic!("the cached bed must not be prepared again"),
+    )
+    .unwrap();
+    assert!(again.from_cache);
+    assert_eq!(again.grains.len(), first.grains.len());
+    for (a, b) in again.grains.iter().zip(&first.grains) {
+        assert_eq!(a.index, b.index);
+        assert_eq!(
+            a.position.to_array().map(f64::to_bits),
+            b.position.to_array().map(f64::to_bits)
+        );
+        assert_eq!(
+            a.orientation.to_array().map(f64::to_bits),
+            b.orientation.to_array().map(f64::to_bits)
+        );
+        assert_eq!(a.shape.vertices, b.shape.vertices);
+    }
+    // Another seed is another bed.
+    let mut other = s.ballast.clone();
+    other.seed += 1;
+    assert_ne!(
+        ballast_railway::preparation::cache_path(
+            &cache_dir(),
+            &s.track,
+            &s.ballast,
+            &s.preparation,
+            &s.friction
+        ),
+        ballast_railway::preparation::cache_path(
+            &cache_dir(),
+            &s.track,
+            &other,
+            &s.preparation,
+            &s.friction
+        )
+    );
+}
+
+#[test]
+fn full_cycle_compacts_the_ballast_under_the_block() {
+    let s = mini();
+    prepared();
+    let mut m = s.build(Some(&cache_dir()), &mut |_| {}).unwrap();
+    assert!(m.from_cache);
+    let p = m.cycle.phases[0];
+    let under = m
+        .indicators
+        .names()
+        .iter()
+        .position(|n| n == "compacity_under_block_1")
+        .unwrap();
+    let block_z = m
+        .indicators
+        .names()
+        .iter()
+        .position(|n| n == "block_z_1_m")
+        .unwrap();
+    let z0 = m.indicators.values(&m.world)[block_z];
+    let run_to = |m: &mut ballast_railway::TrackModel, t: f64| {
+        while m.world.time < t - 1e-9 {
+            m.world.step();
+        }
+    };
+    run_to(&mut m, p.squeeze);
+    let before = m.indicators.values(&m.world);
+    // Lifted by `lift` and held.
+    assert!((before[block_z] - z0 - s.tamping.lift).abs() < 1e-6);
+    run_to(&mut m, p.withdraw);
+    let after = m.indicators.values(&m.world);
+    eprintln!(
+        "compacity under the block: {:.4} before the squeeze, {:.4} after",
+        before[under], after[under]
+    );
+    assert!(
+        after[under] > before[under] + 0.005,
+        "{} → {}",
+        before[under],
+        after[under]
+    );
+    // The tines pushed the ballast: a compressive force along the squeeze on both sides.
+    let end_time = m.cycle.duration;
+    run_to(&mut m, end_time);
+    let end = m.indicators.values(&m.world);
+    // Released, the block rests on the tamped ballast, above its initial level.
+    assert!(end[block_z] > z0 - 0.005 && end[block_z] < z0 + s.tamping.lift + 1e-3);
+    let n = s.steps();
+    assert_eq!(m.world.step_index, n);
+}
