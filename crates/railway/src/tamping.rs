@@ -394,9 +394,10 @@ mod tests {
             assert!((tip - (lifted_soffit - s.depth_below_soffit)).abs() < 1e-6);
             // Back to the start height at the end.
             assert!(displacement(&tine.driver.vz, 0.0, c.duration).abs() < 1e-6);
-            // Squeeze toward the block, vibration averages out over whole periods.
+            // Squeeze toward the block, vibration averages out over whole periods (exactly; the
+            // quadrature errs by up to h·Aω/2 ≈ 3e-6 m at the velocity jumps of the sine's ends).
             let dx = displacement(&tine.driver.vx, 0.0, c.duration);
-            assert!((dx + tine.side * s.squeeze).abs() < 1e-6, "{dx}");
+            assert!((dx + tine.side * s.squeeze).abs() < 1e-5, "{dx}");
             // Inner face ends open_gap − squeeze from the block face.
             let face = track.block_box(1);
             let inner = if tine.side < 0.0 {
@@ -404,7 +405,7 @@ mod tests {
             } else {
                 face.max.x - (tine.blade.min.x + dx)
             };
-            assert!((inner.abs() - (s.open_gap - s.squeeze)).abs() < 1e-6);
+            assert!((inner.abs() - (s.open_gap - s.squeeze)).abs() < 1e-5);
         }
         // Vibration amplitude: peak displacement about A around the mean path.
         let tine = &c.tines[0];
