@@ -23,8 +23,8 @@
 //!   get its deepest vertex as sole point).
 
 use ballast_engine::detection::narrow::{
-    plane_polyhedron, polyhedron_polyhedron, reduce_to_four, Manifold, ManifoldPoint,
-    WorldPolyhedron,
+    plane_polyhedron, polyhedron_polyhedron, polyhedron_polyhedron_hinted, reduce_to_four,
+    FaceHint, Manifold, ManifoldPoint, WorldPolyhedron,
 };
 use ballast_engine::math::{DQuat, DVec3};
 use ballast_engine::shapes::random::{random_grain, GrainParams};
@@ -353,6 +353,7 @@ fn check_pair(a: &Body, b: &Body, alert: f64, stats: &mut Stats) -> Result<(), S
     if bits(&got) != bits(&again) {
         return Err("not deterministic".into());
     }
+    check_hints(a, b, alert, &got)?;
     // Contact whenever the reference separation is within alert; "no contact" only when it
     // exceeds alert. Apart, the implementation's axes (face normals and Gauss-map edge pairs)
     // may separate a little less than all candidates (vertex–vertex or edge–vertex approaches):
@@ -475,6 +476,43 @@ fn check_pair(a: &Body, b: &Body, alert: f64, stats: &mut Stats) -> Result<(), S
 
 /// Near-parallel faces: a large face of B faces a large face of A, tilted by 1e-6…1e-3 rad,
 /// slightly overlapping or just apart.
+/// Temporal coherence never changes the answer: with no hint, every face of either body as
+/// hint, and out-of-range faces, the result is the same bit for bit; a face hint returned with
+/// "no contact" names a face that really separates the bodies by more than `alert`, and given
+/// back, it is kept.
+fn check_hints(a: &Body, b: &Body, alert: f64, got: &Option<Manifold>) -> Result<(), String> {
+    let mut hints = vec![FaceHint::NONE];
+    for (of_b, body) in [(false, a), (true, b)] {
+        let faces = body.shape.num_faces();
+        hints.extend((0..faces + 2).map(|f| FaceHint::new(of_b, f)));
+    }
+    let (_, first) = polyhedron_polyhedron_hinted(&a.world(), &b.world(), alert, FaceHint::NONE);
+    for hint in hints {
+        let (m, next) = polyhedron_polyhedron_hinted(&a.world(), &b.world(), alert, hint);
+        if bits(&m) != bits(got) {
+            return Err(format!("hint {:?} changed the result", hint.get()));
+        }
+        if m.is_none() && hint == first && next != first {
+            return Err(format!("separating hint {:?} not kept", hint.get()));
+        }
+    }
+    if let (None, Some((of_b, f))) = (got, first.get()) {
+        let (r, o) = if of_b { (b, a) } else { (a, b) };
+        let sep = o
+            .vertices
+            .iter()
+            .map(|&v| r.normals[f].dot(v) - r.offsets[f])
+            .fold(f64::INFINITY, f64::min);
+        if sep <= alert || sep.is_nan() {
+            return Err(format!(
+                "hint face {f} of {} separates by {sep:e} only",
+                if of_b { "B" } else { "A" }
+            ));
+        }
+    }
+    Ok(())
+}
+
 fn near_parallel(rng: &mut ChaCha8Rng) -> (Body, Body, f64) {
     let (sa, sb) = (random_shape(rng), random_shape(rng));
     let a = Body::from_build(&sa, DVec3::ZERO, random_rotation(rng));

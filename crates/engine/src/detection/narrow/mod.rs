@@ -10,7 +10,7 @@ mod polyhedra;
 mod reduce;
 
 pub use plane::plane_polyhedron;
-pub use polyhedra::polyhedron_polyhedron;
+pub use polyhedra::{polyhedron_polyhedron, polyhedron_polyhedron_hinted, FaceHint};
 pub use reduce::reduce_to_four;
 
 use crate::math::DVec3;
