@@ -132,7 +132,8 @@ const FAMILIES: [Family; 3] = [
 const UNITS: [&str; 9] = ["N", "kN", "MN", "m", "mm", "s", "J", "Pa", "kPa"];
 
 /// Legend name and unit of a family column: `compacity_3` → ("CV 3", "-"),
-/// `tine_force_left_N` → ("left", "N").
+/// `tine_force_left_N` → ("left", "N"), `tine_force_2_x_N` (the track model's per-axis
+/// columns) → ("tine 2 x", "N").
 fn member(f: &Family, column: &str) -> (String, String) {
     let rest = &column[f.prefix.len()..];
     let (stem, unit) = match rest.rsplit_once('_') {
@@ -140,10 +141,15 @@ fn member(f: &Family, column: &str) -> (String, String) {
         _ if UNITS.contains(&rest) => ("", rest),
         _ => (rest, f.default_unit),
     };
+    // A number first names the object by the family's noun, whatever follows (an axis).
+    let numbered = stem
+        .split('_')
+        .next()
+        .is_some_and(|n| !n.is_empty() && n.chars().all(|c| c.is_ascii_digit()));
     let name = if stem.is_empty() {
         f.noun.to_string()
-    } else if stem.chars().all(|c| c.is_ascii_digit()) {
-        format!("{} {stem}", f.noun)
+    } else if numbered {
+        format!("{} {}", f.noun, stem.replace('_', " "))
     } else {
         stem.replace('_', " ")
     };
@@ -916,6 +922,19 @@ mod tests {
             ("left".into(), "kN".into())
         );
         assert_eq!(member(f, "tine_force_N"), ("tine".into(), "N".into()));
+        // The track model's columns: per tine and axis, per block, per control volume.
+        assert_eq!(
+            member(f, "tine_force_3_z_N"),
+            ("tine 3 z".into(), "N".into())
+        );
+        assert_eq!(
+            member(&FAMILIES[2], "block_z_1_m"),
+            ("block 1".into(), "m".into())
+        );
+        assert_eq!(
+            member(&FAMILIES[0], "compacity_under_block_1"),
+            ("under block 1".into(), "-".into())
+        );
         assert_eq!(
             member(&FAMILIES[0], "compacity_3"),
             ("CV 3".into(), "-".into())
