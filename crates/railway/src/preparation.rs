@@ -353,6 +353,8 @@ fn prepare_from(
             norm: ConvergenceNorm::Quad,
             ..SolverSettings::default()
         },
+        // Parallel NLGS on the same split as the default job (deterministic, any thread count).
+        ddm: Some(crate::scenario::default_ddm()),
         ..StepSettings::default()
     };
     let density = ballast.grains.density;
@@ -471,7 +473,8 @@ fn place_on_height_map(grains: &mut [PlacedGrain], bed: &crate::track::Aabb, see
     let mut top = bed.min.z;
     // Envelopes `(low, high)` of the footprint's cells at the spot being tried and at the best
     // spot so far, row by row (NaN outside the silhouette).
-    let (mut envelope, mut chosen): (Vec<(f64, f64)>, Vec<(f64, f64)>) = (Vec::new(), Vec::new());
+    let mut envelope: Vec<(f64, f64)> = Vec::new();
+    let mut chosen: Vec<(f64, f64)> = Vec::new();
     for g in grains.iter_mut() {
         let q = g.orientation;
         let (lo, hi) = g.shape.vertices.iter().fold(

@@ -145,8 +145,9 @@ struct TrackFile {
     friction: TrackFriction,
     #[serde(default)]
     indicators: IndicatorSpec,
-    #[serde(default = "track_solver")]
-    solver: SolverSettings,
+    /// Keys given here override the track defaults ([`track_solver`]) one by one.
+    #[serde(default)]
+    solver: Option<toml::Table>,
     #[serde(default)]
     correction: CorrectionSettings,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -160,6 +161,29 @@ fn track_solver() -> SolverSettings {
         max_iterations: 300,
         norm: ConvergenceNorm::Quad,
         ..SolverSettings::default()
+    }
+}
+
+/// The track solver defaults with the keys of a `[solver]` table on top (unknown keys and
+/// wrong types are refused by name).
+fn merge_solver(table: Option<toml::Table>) -> Result<SolverSettings, String> {
+    let Some(table) = table else {
+        return Ok(track_solver());
+    };
+    let mut merged = toml::Table::try_from(track_solver()).map_err(|e| e.to_string())?;
+    merged.extend(table);
+    merged
+        .try_into()
+        .map_err(|e: toml::de::Error| format!("[solver]: {}", e.message()))
+}
+
+/// The default job's domain decomposition: 2 × 2 contact-balanced boxes (along and across the
+/// track), more subdomains than the 2 cores this job is sized for. The split depends on the
+/// scene alone, so results are the same on any number of threads.
+pub fn default_ddm() -> DdmSettings {
+    DdmSettings {
+        subdomains: [2, 2, 1],
+        ..DdmSettings::default()
     }
 }
 
@@ -185,7 +209,7 @@ impl TrackScenario {
             indicators: IndicatorSpec::default(),
             solver: track_solver(),
             correction: CorrectionSettings::default(),
-            ddm: None,
+            ddm: Some(default_ddm()),
         }
     }
 
@@ -268,7 +292,7 @@ impl TrackScenario {
             tamping: f.tamping,
             friction: f.friction,
             indicators: f.indicators,
-            solver: f.solver,
+            solver: merge_solver(f.solver)?,
             correction: f.correction,
             ddm: f.ddm,
         };
@@ -440,4 +464,36 @@ pub struct TrackModel {
     pub from_cache: bool,
     /// Set when the prepared bed could not be cached.
     pub cache_warning: Option<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_partial_solver_table_keeps_the_track_defaults_of_the_other_keys() {
+        let s = TrackScenario::from_toml("[track]\n[solver]\ntolerance = 1e-4\n").unwrap();
+        assert_eq!(s.solver.tolerance, 1e-4);
+        assert_eq!(s.solver.max_iterations, 300);
+        assert_eq!(s.solver.norm, ConvergenceNorm::Quad);
+        let none = TrackScenario::from_toml("[track]\n").unwrap();
+        assert_eq!(none.solver, track_solver());
+        let e = TrackScenario::from_toml("[track]\n[solver]\nsweeps = 3\n").unwrap_err();
+        assert!(e.contains("[solver]") && e.contains("sweeps"), "{e}");
+        let e =
+            TrackScenario::from_toml("[track]\n[solver]\nmax_iterations = \"many\"\n").unwrap_err();
+        assert!(e.contains("[solver]"), "{e}");
+    }
+
+    #[test]
+    fn presets_split_the_track_along_its_length() {
+        assert_eq!(
+            TrackScenario::paper_preset().ddm.unwrap().subdomains,
+            [7, 1, 1]
+        );
+        assert_eq!(TrackScenario::paper_preset().simulation.dt, 2e-4);
+        let d = TrackScenario::default_preset();
+        assert_eq!(d.ddm.as_ref().unwrap().subdomains, [2, 2, 1]);
+        assert_eq!(d.steps(), 4410);
+    }
 }
