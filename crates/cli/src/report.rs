@@ -87,7 +87,8 @@ impl Table {
     }
 }
 
-/// A family of per-object columns (`compacity_*`, `tine_force_*`, `block_z_*`).
+/// A family of per-object columns (`compacity_*`, `tine_force_*`, `block_z_*`, and the
+/// `coordination` column alone).
 struct Family {
     /// Column-name prefix.
     prefix: &'static str,
@@ -101,7 +102,7 @@ struct Family {
     default_unit: &'static str,
 }
 
-const FAMILIES: [Family; 3] = [
+const FAMILIES: [Family; 4] = [
     Family {
         prefix: "compacity_",
         file: "compacity.png",
@@ -125,6 +126,14 @@ const FAMILIES: [Family; 3] = [
         quantity: "block height z",
         noun: "block",
         default_unit: "m",
+    },
+    Family {
+        prefix: "coordination",
+        file: "coordination.png",
+        title: "Coordination number",
+        quantity: "contacts per grain",
+        noun: "mean",
+        default_unit: "-",
     },
 ];
 
@@ -814,6 +823,7 @@ mod tests {
                 ("compacity_crib_left", |t| 0.6 - t),
                 ("tine_force_1_N", |t| 5e4 * t),
                 ("block_z_1_m", |t| 0.45 - t * 0.1),
+                ("coordination", |t| 4.0 + t),
             ],
         );
         let scenario = "# test scenario\n[simulation]\ndt = 1e-3\n```not a fence```\n";
@@ -843,6 +853,7 @@ mod tests {
             "| final compacity, crib left (-) |",
             "| final tine force, tine 1 (kN) | 2.000 |",
             "| final block height z, block 1 (mm) | 446.0 |",
+            "| final contacts per grain, mean (-) | 4.040 |",
             "`0123456789abcdef`",
         ] {
             assert!(md.contains(needle), "missing {needle:?} in\n{md}");
@@ -856,6 +867,7 @@ mod tests {
             "compacity.png",
             "tines.png",
             "blocks.png",
+            "coordination.png",
         ] {
             assert!(md.contains(&format!("](plots/{png})")), "no link to {png}");
             decodes(&dir.join("plots").join(png));

@@ -701,6 +701,7 @@ fn track_report_plots_the_indicators() {
             "compacity.png",
             "tines.png",
             "blocks.png",
+            "coordination.png",
             "solver.png",
             "energy.png",
             "penetration.png",

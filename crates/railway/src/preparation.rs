@@ -162,6 +162,9 @@ pub struct PreparationReport {
     pub max_speed: f64,
     #[serde(default)]
     pub mean_speed: f64,
+    /// Top of the stacked grains before they settle (m above the floor).
+    #[serde(default)]
+    pub stack_height: f64,
 }
 
 /// A prepared bed: the grains' poses (blocks in their design position).
@@ -436,6 +439,7 @@ fn prepare_from(
             simulated_s: simulated,
             wall_s: clock.elapsed().as_secs_f64(),
             max_penetration,
+            stack_height: height - bed.min.z,
             max_speed: speed,
             mean_speed,
         },

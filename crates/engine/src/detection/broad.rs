@@ -7,8 +7,16 @@
 //! minimum corner of the intersection of the two boxes, so exactly once. Large bodies (big boxes,
 //! blocks) are tested against every small body by box overlap: they are few. Half-spaces are
 //! handled by the caller. The output is sorted, so it does not depend on hashing.
+//!
+//! Every stage runs in parallel (entries, hashing, the pairs of each range of slots, large
+//! bodies, the final sort) except the prefix sum and the scatter of the counting sort, which are
+//! memory-bound single passes; the result is the same on any number of threads.
 
 use crate::math::DVec3;
+use rayon::prelude::*;
+
+/// Slots of the hashed grid per parallel task of the pair search.
+const SLOTS_PER_TASK: usize = 4096;
 
 /// Axis-aligned bounding box.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,7 +64,7 @@ impl BroadPhase {
         &mut self,
         aabbs: &[Aabb],
         candidates: &[u32],
-        skip: impl Fn(u32, u32) -> bool,
+        skip: impl Fn(u32, u32) -> bool + Sync,
         pairs: &mut Vec<(u32, u32)>,
     ) {
         pairs.clear();
@@ -66,7 +74,8 @@ impl BroadPhase {
         // Cell size: the largest extent among the bodies that move (the grains); anything bigger
         // than 2 cells is "large".
         let mut extents: Vec<f64> = candidates
-            .iter()
+            .par_iter()
+            .with_min_len(1024)
             .map(|&i| (aabbs[i as usize].max - aabbs[i as usize].min).max_element())
             .collect();
         let cell = {
@@ -96,27 +105,28 @@ impl BroadPhase {
 
         // 1. Entries (body, cell) for the small bodies.
         self.entries.clear();
-        for &i in &small {
-            let b = &aabbs[i as usize];
-            let lo = cell_of(b.min, inv_cell);
-            let hi = cell_of(b.max, inv_cell);
-            for x in lo[0]..=hi[0] {
-                for y in lo[1]..=hi[1] {
-                    for z in lo[2]..=hi[2] {
-                        self.entries.push((i, [x, y, z]));
-                    }
-                }
-            }
-        }
+        self.entries
+            .par_extend(small.par_iter().with_min_len(1024).flat_map_iter(|&i| {
+                let b = &aabbs[i as usize];
+                let lo = cell_of(b.min, inv_cell);
+                let hi = cell_of(b.max, inv_cell);
+                (lo[0]..=hi[0]).flat_map(move |x| {
+                    (lo[1]..=hi[1]).flat_map(move |y| (lo[2]..=hi[2]).map(move |z| (i, [x, y, z])))
+                })
+            }));
         // 2. Counting sort of the entries by hashed slot.
         let slots = (2 * self.entries.len()).next_power_of_two().max(2);
         let mask = (slots - 1) as u32;
         self.start.clear();
         self.start.resize(slots + 1, 0);
         self.slot_of.clear();
-        for e in &self.entries {
-            let s = hash(e.1, mask);
-            self.slot_of.push(s);
+        self.slot_of.par_extend(
+            self.entries
+                .par_iter()
+                .with_min_len(4096)
+                .map(|e| hash(e.1, mask)),
+        );
+        for &s in &self.slot_of {
             self.start[s as usize + 1] += 1;
         }
         for s in 0..slots {
@@ -132,40 +142,52 @@ impl BroadPhase {
             }
         }
         // 3. Pairs within each slot, reported from the owner cell only.
-        for s in 0..slots {
-            let bucket = &self.sorted[self.start[s] as usize..self.start[s + 1] as usize];
-            for (a, &(i, ci)) in bucket.iter().enumerate() {
-                for &(j, cj) in &bucket[a + 1..] {
-                    if i == j || ci != cj {
-                        continue;
+        let (sorted, start) = (&self.sorted, &self.start);
+        let skip = &skip;
+        pairs.par_extend(
+            (0..slots.div_ceil(SLOTS_PER_TASK))
+                .into_par_iter()
+                .flat_map_iter(|task| {
+                    let mut found = Vec::new();
+                    let end = ((task + 1) * SLOTS_PER_TASK).min(slots);
+                    for s in task * SLOTS_PER_TASK..end {
+                        let bucket = &sorted[start[s] as usize..start[s + 1] as usize];
+                        for (a, &(i, ci)) in bucket.iter().enumerate() {
+                            for &(j, cj) in &bucket[a + 1..] {
+                                if i == j || ci != cj {
+                                    continue;
+                                }
+                                let (bi, bj) = (&aabbs[i as usize], &aabbs[j as usize]);
+                                if !bi.overlaps(bj) {
+                                    continue;
+                                }
+                                if cell_of(bi.min.max(bj.min), inv_cell) != ci {
+                                    continue;
+                                }
+                                let (p, q) = (i.min(j), i.max(j));
+                                if !skip(p, q) {
+                                    found.push((p, q));
+                                }
+                            }
+                        }
                     }
-                    let (bi, bj) = (&aabbs[i as usize], &aabbs[j as usize]);
-                    if !bi.overlaps(bj) {
-                        continue;
-                    }
-                    if cell_of(bi.min.max(bj.min), inv_cell) != ci {
-                        continue;
-                    }
-                    let (p, q) = (i.min(j), i.max(j));
-                    if !skip(p, q) {
-                        pairs.push((p, q));
-                    }
-                }
-            }
-        }
+                    found
+                }),
+        );
         // 4. Large bodies against everything else.
         for (k, &l) in large.iter().enumerate() {
             let bl = &aabbs[l as usize];
-            for &i in small.iter().chain(&large[k + 1..]) {
-                if bl.overlaps(&aabbs[i as usize]) {
-                    let (p, q) = (i.min(l), i.max(l));
-                    if !skip(p, q) {
-                        pairs.push((p, q));
-                    }
-                }
-            }
+            let others: Vec<u32> = small.iter().chain(&large[k + 1..]).copied().collect();
+            pairs.par_extend(
+                others
+                    .par_iter()
+                    .with_min_len(1024)
+                    .filter(|&&i| bl.overlaps(&aabbs[i as usize]))
+                    .map(|&i| (i.min(l), i.max(l)))
+                    .filter(|&(p, q)| !skip(p, q)),
+            );
         }
-        pairs.sort_unstable();
+        pairs.par_sort_unstable();
     }
 }
 
@@ -178,7 +200,8 @@ mod tests {
     #[test]
     fn grid_equals_brute_force() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-        for n in [1usize, 2, 10, 300] {
+        // 5000 boxes: many tasks of the parallel pair search.
+        for n in [1usize, 2, 10, 300, 5000] {
             let mut boxes: Vec<Aabb> = (0..n)
                 .map(|_| {
                     let c = DVec3::new(rng.gen(), rng.gen(), rng.gen()) * 0.5;
@@ -198,6 +221,18 @@ mod tests {
             let mut bp = BroadPhase::default();
             let mut pairs = Vec::new();
             bp.find_pairs(&boxes, &all, |_, _| false, &mut pairs);
+            // The same on 1 and 4 threads.
+            for threads in [1, 4] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut again = Vec::new();
+                pool.install(|| {
+                    BroadPhase::default().find_pairs(&boxes, &all, |_, _| false, &mut again)
+                });
+                assert_eq!(again, pairs, "n = {n}, {threads} threads");
+            }
             let mut brute = Vec::new();
             for i in 0..boxes.len() {
                 for j in i + 1..boxes.len() {
