@@ -10,7 +10,7 @@
 //!    surfaces of the grains already placed, so the stack is about as dense as a loose pour and
 //!    barely overlapping. Let them settle in the empty box with cheap solver settings (`dt`,
 //!    `tolerance`, `max_iterations` below) until the stack's excess height has had time to fall,
-//!    plus `settle_time`, and the fastest grain is slower than `rest_speed` (waiting at most
+//!    plus `settle_time`, and 99 % of the grains are slower than `rest_speed` (waiting at most
 //!    `max_extra_time` more).
 //! 3. Put the blocks in place, as an excavation: remove every grain that overlaps a block
 //!    (exact clipped volume > 0) or whose centre is above the block tops (the cribs are then
@@ -82,7 +82,8 @@ pub struct PreparationSpec {
     pub max_iterations: usize,
     /// Settling time after the fall, and after the blocks are put in place (s).
     pub settle_time: f64,
-    /// The bed is at rest when no grain is faster than this (m/s).
+    /// The bed is at rest when 99 % of its grains are slower than this (m/s): a few rattlers
+    /// at the surface, which may spin for long, do not hold the preparation up.
     pub rest_speed: f64,
     /// Longest wait for rest beyond the minimum time of a stage (s of simulated time).
     pub max_extra_time: f64,
@@ -372,7 +373,7 @@ fn prepare_from(
             let r = world.step();
             steps += 1;
             if world.step_index.is_multiple_of(20) {
-                speed = speeds(world).0;
+                speed = rest_quantile(world);
                 progress(PrepProgress {
                     stage,
                     time: world.time,
@@ -562,8 +563,25 @@ fn place_on_height_map(grains: &mut [PlacedGrain], bed: &crate::track::Aabb, see
 /// Largest and mean speed of the dynamic bodies (m/s), rotation included through the
 /// circumscribed radius.
 fn speeds(world: &World) -> (f64, f64) {
+    let all = grain_speeds(world);
+    let max = all.iter().copied().fold(0.0, f64::max);
+    (max, all.iter().sum::<f64>() / all.len().max(1) as f64)
+}
+
+/// The speed that 99 % of the dynamic bodies stay below (m/s), see [`speeds`].
+fn rest_quantile(world: &World) -> f64 {
+    let mut all = grain_speeds(world);
+    if all.is_empty() {
+        return 0.0;
+    }
+    let k = (0.99 * (all.len() - 1) as f64).round() as usize;
+    *all.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
+/// Speed of each dynamic body, rotation included at its circumscribed radius (m/s).
+fn grain_speeds(world: &World) -> Vec<f64> {
     let b = &world.bodies;
-    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
+    let mut out = Vec::with_capacity(b.len());
     for i in 0..b.len() {
         if b.kind[i] != ballast_engine::bodies::BodyKind::Dynamic {
             continue;
@@ -572,12 +590,9 @@ fn speeds(world: &World) -> (f64, f64) {
             Shape::Polyhedron(p) => p.radius,
             Shape::Plane { .. } => 0.0,
         };
-        let v = b.velocity[i].length() + b.angular_velocity[i].length() * r;
-        max = max.max(v);
-        sum += v;
-        n += 1;
+        out.push(b.velocity[i].length() + b.angular_velocity[i].length() * r);
     }
-    (max, sum / n.max(1) as f64)
+    out
 }
 
 /// The cache file: magic, format, key, report (JSON), then per kept grain its index in the
