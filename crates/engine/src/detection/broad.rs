@@ -177,10 +177,10 @@ impl BroadPhase {
         // 4. Large bodies against everything else.
         for (k, &l) in large.iter().enumerate() {
             let bl = &aabbs[l as usize];
-            let others: Vec<u32> = small.iter().chain(&large[k + 1..]).copied().collect();
             pairs.par_extend(
-                others
+                small
                     .par_iter()
+                    .chain(large[k + 1..].par_iter())
                     .with_min_len(1024)
                     .filter(|&&i| bl.overlaps(&aabbs[i as usize]))
                     .map(|&i| (i.min(l), i.max(l)))

@@ -150,16 +150,15 @@ fn sat(
     }
 
     let tol = PREFER_RELATIVE * a.shape.radius.min(b.shape.radius);
-    let (face_a, scanned_a) = face_axis(a, b, alert, None).map_err(|f| FaceHint::new(false, f))?;
-    // While testing B's faces, flag A's vertices lying far beyond them, then B's vertices lying
-    // far beyond A's faces, to skip the edges far from the other body (see `edge_axis`). `near`
-    // bounds `max(−floor, alert)` from above whatever B's best face turns out to be, since
-    // `floor ≥ face_a.sep`.
+    let (face_a, scanned_a) = face_axis(a, b, alert).map_err(|f| FaceHint::new(false, f))?;
+    let (face_b, scanned_b) = face_axis(b, a, alert).map_err(|f| FaceHint::new(true, f))?;
+    // Flag each body's vertices lying far beyond a scanned face of the other, to skip the edges
+    // far from the other body (see `edge_axis`). `near` bounds `max(−floor, alert)` from above,
+    // since `floor ≥ face_a.sep`.
     let near = (-face_a.sep).max(alert) + tol;
     let (mut stack_far_a, mut heap_far_a) = ([0u64; STACK_VERTICES], Vec::new());
     let far_a = scratch(&mut stack_far_a, &mut heap_far_a, a.vertices.len(), 0);
-    let (face_b, _) =
-        face_axis(b, a, alert, Some((far_a, near))).map_err(|f| FaceHint::new(true, f))?;
+    far_masks(b, a, near, scanned_b, far_a);
     let (mut stack_far_b, mut heap_far_b) = ([0u64; STACK_VERTICES], Vec::new());
     let far_b = scratch(&mut stack_far_b, &mut heap_far_b, b.vertices.len(), 0);
     far_masks(a, b, near, scanned_a, far_b);
@@ -250,10 +249,6 @@ struct FaceAxis {
 /// The face of `r` of largest separation from `o` and the set of faces scanned (bit `f` for the
 /// first 64 faces), or `Err(f)` for a face `f` separating the bodies by more than `alert`.
 ///
-/// With `far = Some((masks, thr))`, also sets bit `f` of `masks[v]` for each scanned face `f`
-/// (of the first 64) of `r` that vertex `v` of `o` lies beyond by more than `thr`: a subset of
-/// the far vertices, which is all [`edge_axis`] needs.
-///
 /// Only the faces that can win are scanned: `o`'s centre of mass `c` lies in its hull and every
 /// vertex within its circumradius `ρ` of `c`, so the separation along face `f` lies in
 /// `[U_f − ρ, U_f]` with `U_f = n_f·c − d_f`. The face of largest `U_f` is scanned first; then,
@@ -265,7 +260,6 @@ fn face_axis(
     r: &WorldPolyhedron,
     o: &WorldPolyhedron,
     alert: f64,
-    mut far: Option<(&mut [u64], f64)>,
 ) -> Result<(FaceAxis, u64), usize> {
     let rho = o.shape.radius;
     let faces = r.face_normals.len();
@@ -296,23 +290,8 @@ fn face_axis(
         if best.as_ref().is_some_and(|b| upper[f] + slack < b.sep) {
             continue;
         }
-        let (n, d) = (r.face_normals[f], r.face_offsets[f]);
-        let (support, min) = match far.as_mut() {
-            Some((masks, thr)) if f < 64 => {
-                let mut arg = 0;
-                let mut min = f64::INFINITY;
-                for (i, (&v, mask)) in o.vertices.iter().zip(masks.iter_mut()).enumerate() {
-                    let s = n.dot(v);
-                    if s < min {
-                        min = s;
-                        arg = i;
-                    }
-                    *mask |= u64::from(s - d > *thr) << f;
-                }
-                (arg, min)
-            }
-            _ => min_vertex(o.vertices, n),
-        };
+        let (support, min) = min_vertex(o.vertices, r.face_normals[f]);
+        let d = r.face_offsets[f];
         if f < 64 {
             scanned |= 1 << f;
         }
@@ -390,7 +369,7 @@ struct EdgeAxis {
 /// `Some(None)` if none beats `floor`.
 ///
 /// With `far = Some((far_a, far_b))`, an edge of A whose two ends are flagged beyond the same
-/// face plane of B (by more than some `thr ≥ max(−floor, alert)`, see [`face_axis`]) is skipped,
+/// face plane of B (by more than some `thr ≥ max(−floor, alert)`, see [`far_masks`]) is skipped,
 /// and so is an edge of B whose ends are beyond the same face plane of A. This loses nothing
 /// when the bodies are within `thr` of each other: overlapping, the best edge axis `n`
 /// (separation `s ∈ [floor, 0]`) has witness points `qa` on A's edge and `qa + s·n` on B's edge,
