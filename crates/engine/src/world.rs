@@ -246,38 +246,47 @@ impl World {
         let s = &self.settings;
         let (h, theta) = (s.dt, s.theta);
 
-        // 3. NLGS, monolithic or domain-decomposed.
-        let solve = match &s.ddm {
-            None => nlgs.solve(
-                &mut self.locals,
-                &mut self.solver_bodies,
-                &mut self.contacts.status,
-            ),
+        // 3. NLGS, monolithic or domain-decomposed, then the overlap correction (on the
+        // same split).
+        let (solve, corrected) = match &s.ddm {
+            None => {
+                let report = nlgs.solve(
+                    &mut self.locals,
+                    &mut self.solver_bodies,
+                    &mut self.contacts.status,
+                );
+                let corrected = pseudo_velocities(
+                    &s.correction,
+                    h,
+                    &self.locals,
+                    &self.solver_bodies,
+                    &mut self.pseudo,
+                );
+                (report, corrected)
+            }
             Some(d) => {
                 let partition = self.partition(d);
-                let (report, t) = ddm::solve(
+                let (report, t, corrected) = ddm::solve_and_correct(
                     &nlgs,
                     d,
                     &partition,
                     &mut self.locals,
                     &mut self.solver_bodies,
                     &mut self.contacts.status,
+                    Some(ddm::CorrectionPass {
+                        settings: &s.correction,
+                        h,
+                        pseudo: &mut self.pseudo,
+                    }),
                 );
                 times.subdomains = t.subdomains;
                 times.interface = t.interface;
-                report
+                (report, corrected)
             }
         };
         for (r, c) in self.contacts.impulse.iter_mut().zip(&self.locals) {
             *r = c.r;
         }
-        let corrected = pseudo_velocities(
-            &s.correction,
-            h,
-            &self.locals,
-            &self.solver_bodies,
-            &mut self.pseudo,
-        );
         times.nlgs += lap.lap();
         let free_w = &self.free_w;
 

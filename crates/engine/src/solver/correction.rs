@@ -9,7 +9,7 @@
 //! positions move by `h Ṽ`; the velocities are untouched, so no kinetic energy is injected.
 //! β = 0 switches it off (plain Moreau-Jean, as LMGC90).
 
-use super::delassus::{LocalProblem, SolverBody};
+use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use crate::math::DVec3;
 use serde::{Deserialize, Serialize};
 
@@ -51,8 +51,74 @@ impl CorrectionSettings {
     }
 }
 
+/// An overlapping contact of the pseudo-velocity problem.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Overlap {
+    /// Index of the contact among the local problems it was found in.
+    pub k: u32,
+    /// Target separation speed `b_α` (m/s).
+    pub target: f64,
+    /// Pseudo normal impulse `p_α ≥ 0`.
+    pub p: f64,
+}
+
+/// A body's solver copy with zero velocities (its inverse masses kept).
+pub fn at_rest(b: &SolverBody) -> SolverBody {
+    SolverBody {
+        v: DVec3::ZERO,
+        w: DVec3::ZERO,
+        ..*b
+    }
+}
+
+/// Lists in `out` the contacts of `locals` overlapping beyond the slop, in order, with
+/// `p = 0`; returns how many. None when the correction is off.
+pub fn overlaps(
+    settings: &CorrectionSettings,
+    h: f64,
+    locals: &[LocalProblem],
+    out: &mut Vec<Overlap>,
+) -> usize {
+    out.clear();
+    if settings.fraction == 0.0 {
+        return 0;
+    }
+    out.extend(
+        locals
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.gap < -settings.slop)
+            .map(|(k, c)| Overlap {
+                k: k as u32,
+                target: settings.fraction * (-c.gap - settings.slop) / h,
+                p: 0.0,
+            }),
+    );
+    out.len()
+}
+
+/// One projected Gauss-Seidel sweep over `rows` (in order):
+/// `p_α ← max(0, p_α + (b_α − ũₙ,α) / W_α,nn)`, the pseudo-velocities updated at once.
+pub fn sweep<B: BodyAccess + ?Sized>(
+    locals: &[LocalProblem],
+    rows: &mut [Overlap],
+    pseudo: &mut B,
+) {
+    for row in rows {
+        let c = &locals[row.k as usize];
+        let un = c.velocity(pseudo).x;
+        let new = (row.p + (row.target - un) / c.w.x_axis.x).max(0.0);
+        let dp = new - row.p;
+        if dp != 0.0 {
+            c.apply(pseudo, DVec3::new(dp, 0.0, 0.0));
+            row.p = new;
+        }
+    }
+}
+
 /// Computes the pseudo-velocities in `pseudo` (one per body, zero-initialised here; inverse
-/// masses copied from `bodies`) for the overlapping contacts among `locals`.
+/// masses copied from `bodies`) for the overlapping contacts among `locals`, by
+/// `settings.sweeps` sweeps in contact order. Returns whether any contact overlapped.
 pub fn pseudo_velocities(
     settings: &CorrectionSettings,
     h: f64,
@@ -61,35 +127,13 @@ pub fn pseudo_velocities(
     pseudo: &mut Vec<SolverBody>,
 ) -> bool {
     pseudo.clear();
-    pseudo.extend(bodies.iter().map(|b| SolverBody {
-        v: DVec3::ZERO,
-        w: DVec3::ZERO,
-        ..*b
-    }));
-    if settings.fraction == 0.0 {
+    pseudo.extend(bodies.iter().map(at_rest));
+    let mut rows = Vec::new();
+    if overlaps(settings, h, locals, &mut rows) == 0 {
         return false;
     }
-    let active: Vec<(usize, f64)> = locals
-        .iter()
-        .enumerate()
-        .filter(|(_, c)| c.gap < -settings.slop)
-        .map(|(k, c)| (k, settings.fraction * (-c.gap - settings.slop) / h))
-        .collect();
-    if active.is_empty() {
-        return false;
-    }
-    let mut p = vec![0.0; active.len()];
     for _ in 0..settings.sweeps {
-        for (&(k, target), pk) in active.iter().zip(p.iter_mut()) {
-            let c = &locals[k];
-            let un = c.velocity(pseudo.as_slice()).x;
-            let new = (*pk + (target - un) / c.w.x_axis.x).max(0.0);
-            let dp = new - *pk;
-            if dp != 0.0 {
-                c.apply(pseudo.as_mut_slice(), DVec3::new(dp, 0.0, 0.0));
-                *pk = new;
-            }
-        }
+        sweep(locals, &mut rows, pseudo.as_mut_slice());
     }
     true
 }

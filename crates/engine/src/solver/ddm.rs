@@ -10,7 +10,8 @@
 //!    2. `m` NLGS sweeps on Γ;
 //!    3. error of each (the Quad sums of their last sweep, added in a fixed order) and the
 //!       convergence test;
-//! 3. velocities back to the bodies (the update is done by the caller).
+//! 3. velocities back to the bodies (the update is done by the caller);
+//! 4. optionally ([`solve_and_correct`]), the overlap correction's sweeps on the same split.
 //!
 //! Beyond the paper, Γ is solved in parallel too: its contacts are grouped by the pair of
 //! subdomains they join, the subdomain-adjacency edges are coloured greedily (in a fixed order)
@@ -19,6 +20,7 @@
 //! bit-identical results for any number of threads. With `n = m = 1` the iterate is exactly
 //! monolithic NLGS run in [`DdmProblem::equivalent_order`].
 
+use super::correction::{self, CorrectionSettings, Overlap};
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::nlgs::{Nlgs, SolveReport, SweepSums};
 use super::partition::{Balance, Partition, STATIC};
@@ -88,6 +90,36 @@ pub struct DdmTimes {
     pub interface: f64,
 }
 
+/// Contacts solved together (a subdomain's, or an interface group's), bodies in solver
+/// numbering.
+#[derive(Clone, Debug, Default)]
+pub struct Bucket {
+    pub locals: Vec<LocalProblem>,
+    /// Index of each contact in the caller's order.
+    pub origin: Vec<u32>,
+    pub status: Vec<ContactStatus>,
+    /// The overlapping contacts of the position correction (indices into `locals`).
+    pub overlaps: Vec<Overlap>,
+}
+
+impl Bucket {
+    fn push(&mut self, l: LocalProblem, origin: u32) {
+        self.locals.push(l);
+        self.origin.push(origin);
+        self.status.push(ContactStatus::NoContact);
+    }
+
+    /// Number of contacts.
+    pub fn len(&self) -> usize {
+        self.locals.len()
+    }
+
+    /// Whether it holds no contact.
+    pub fn is_empty(&self) -> bool {
+        self.locals.is_empty()
+    }
+}
+
 /// Interface contacts joining one pair of subdomains.
 #[derive(Clone, Debug)]
 pub struct InterfaceGroup {
@@ -95,18 +127,13 @@ pub struct InterfaceGroup {
     pub pair: (u32, u32),
     /// Colour: groups of one colour touch disjoint subdomains.
     pub colour: usize,
-    pub locals: Vec<LocalProblem>,
-    /// Index of each contact in the caller's order.
-    pub origin: Vec<u32>,
-    pub status: Vec<ContactStatus>,
+    pub bucket: Bucket,
 }
 
 /// The contacts bucketed by subdomain and interface group, bodies in solver numbering.
 #[derive(Clone, Debug)]
 pub struct DdmProblem {
-    pub sub: Vec<Vec<LocalProblem>>,
-    pub sub_origin: Vec<Vec<u32>>,
-    pub sub_status: Vec<Vec<ContactStatus>>,
+    pub sub: Vec<Bucket>,
     /// Sorted by `(colour, pair)`; a single group with pair `(STATIC, STATIC)` when the
     /// interface is solved sequentially.
     pub groups: Vec<InterfaceGroup>,
@@ -117,8 +144,7 @@ impl DdmProblem {
     /// Buckets `locals` (bodies in the original numbering) by the partition.
     pub fn build(partition: &Partition, locals: &[LocalProblem], parallel_interface: bool) -> Self {
         let k = partition.count();
-        let mut sub = vec![Vec::new(); k];
-        let mut sub_origin = vec![Vec::new(); k];
+        let mut sub = vec![Bucket::default(); k];
         let mut gamma: Vec<((u32, u32), u32, LocalProblem)> = Vec::new();
         for (idx, c) in locals.iter().enumerate() {
             let (s1, s2) = (
@@ -135,10 +161,7 @@ impl DdmProblem {
                 _ => None,
             };
             match owner {
-                Some(e) if e != STATIC => {
-                    sub[e as usize].push(l);
-                    sub_origin[e as usize].push(idx as u32);
-                }
+                Some(e) if e != STATIC => sub[e as usize].push(l, idx as u32),
                 // Two static bodies never make a contact (detection skips them); keep it in Γ.
                 _ => {
                     let pair = if parallel_interface {
@@ -158,15 +181,10 @@ impl DdmProblem {
                 groups.push(InterfaceGroup {
                     pair,
                     colour: 0,
-                    locals: Vec::new(),
-                    origin: Vec::new(),
-                    status: Vec::new(),
+                    bucket: Bucket::default(),
                 });
             }
-            let g = groups.last_mut().expect("pushed above");
-            g.locals.push(l);
-            g.origin.push(idx);
-            g.status.push(ContactStatus::NoContact);
+            groups.last_mut().expect("pushed above").bucket.push(l, idx);
         }
         let mut used: Vec<Vec<usize>> = vec![Vec::new(); k];
         let mut colours = 0;
@@ -186,30 +204,29 @@ impl DdmProblem {
             colours = colours.max(c + 1);
         }
         groups.sort_by_key(|g| (g.colour, g.pair));
-        let sub_status = sub
-            .iter()
-            .map(|s| vec![ContactStatus::NoContact; s.len()])
-            .collect();
         DdmProblem {
             sub,
-            sub_origin,
-            sub_status,
             groups,
             colours,
         }
     }
 
+    /// The buckets in the equivalent order: subdomains, then Γ by colour and group.
+    fn buckets(&self) -> impl Iterator<Item = &Bucket> {
+        self.sub.iter().chain(self.groups.iter().map(|g| &g.bucket))
+    }
+
     /// Caller's contact indices in the order of the equivalent monolithic NLGS: subdomain 0's
     /// contacts, …, subdomain k−1's, then Γ by colour and group.
     pub fn equivalent_order(&self) -> Vec<u32> {
-        let mut out: Vec<u32> = self.sub_origin.iter().flatten().copied().collect();
-        out.extend(self.groups.iter().flat_map(|g| g.origin.iter().copied()));
-        out
+        self.buckets()
+            .flat_map(|b| b.origin.iter().copied())
+            .collect()
     }
 
     /// Number of interface contacts.
     pub fn interface_len(&self) -> usize {
-        self.groups.iter().map(|g| g.locals.len()).sum()
+        self.groups.iter().map(|g| g.bucket.len()).sum()
     }
 }
 
@@ -290,42 +307,40 @@ fn for_subdomains<T: Send>(
     p: &mut DdmProblem,
     pb: &mut [SolverBody],
     starts: &[usize],
-    f: impl Fn(&mut Vec<LocalProblem>, &mut Vec<ContactStatus>, &mut SubView) -> T + Sync,
+    f: impl Fn(&mut Bucket, &mut SubView) -> T + Sync,
 ) -> Vec<T> {
     let k = starts.len() - 1;
     let static_start = starts[k] as u32;
     let (slices, statics) = split(pb, starts);
-    if p.sub.iter().map(Vec::len).sum::<usize>() < PARALLEL_MIN_CONTACTS {
+    if p.sub.iter().map(Bucket::len).sum::<usize>() < PARALLEL_MIN_CONTACTS {
         return p
             .sub
             .iter_mut()
-            .zip(p.sub_status.iter_mut())
             .zip(slices)
             .enumerate()
-            .map(|(e, ((locals, status), own))| {
+            .map(|(e, (bucket, own))| {
                 let mut view = SubView {
                     own,
                     start: starts[e] as u32,
                     statics,
                     static_start,
                 };
-                f(locals, status, &mut view)
+                f(bucket, &mut view)
             })
             .collect();
     }
     p.sub
         .par_iter_mut()
-        .zip(p.sub_status.par_iter_mut())
         .zip(slices.into_par_iter())
         .enumerate()
-        .map(|(e, ((locals, status), own))| {
+        .map(|(e, (bucket, own))| {
             let mut view = SubView {
                 own,
                 start: starts[e] as u32,
                 statics,
                 static_start,
             };
-            f(locals, status, &mut view)
+            f(bucket, &mut view)
         })
         .collect()
 }
@@ -336,7 +351,7 @@ fn for_interface<T: Send>(
     p: &mut DdmProblem,
     pb: &mut [SolverBody],
     starts: &[usize],
-    f: impl Fn(&mut InterfaceGroup, &mut dyn BodyAccessDyn) -> T + Sync,
+    f: impl Fn(&mut Bucket, &mut dyn BodyAccessDyn) -> T + Sync,
 ) -> Vec<T> {
     let mut out = Vec::with_capacity(p.groups.len());
     for colour in 0..p.colours {
@@ -346,7 +361,7 @@ fn for_interface<T: Send>(
             .any(|g| g.colour == colour && g.pair.0 == STATIC);
         if sequential {
             for g in p.groups.iter_mut().filter(|g| g.colour == colour) {
-                out.push(f(g, &mut FullView(pb)));
+                out.push(f(&mut g.bucket, &mut FullView(pb)));
             }
             continue;
         }
@@ -363,7 +378,7 @@ fn for_interface<T: Send>(
                     b: sb,
                     b_start: starts[b] as u32,
                 };
-                tasks.push((g, view));
+                tasks.push((&mut g.bucket, view));
             }
         }
         let results: Vec<T> = tasks
@@ -426,6 +441,33 @@ pub fn solve(
     bodies: &mut [SolverBody],
     status: &mut [ContactStatus],
 ) -> (SolveReport, DdmTimes) {
+    let (report, times, _) = solve_and_correct(nlgs, ddm, partition, locals, bodies, status, None);
+    (report, times)
+}
+
+/// The overlap correction run after the velocity solve, on the same split.
+pub struct CorrectionPass<'a> {
+    pub settings: &'a CorrectionSettings,
+    /// Time step (s).
+    pub h: f64,
+    /// The pseudo-velocities, one per body in the caller's numbering (output).
+    pub pseudo: &'a mut Vec<SolverBody>,
+}
+
+/// [`solve`], then the overlap correction ([`super::correction`]) on the same subdomains and
+/// interface groups: each of its sweeps runs the subdomains in parallel, then Γ colour by
+/// colour, so the pseudo-velocities equal those of [`super::correction::pseudo_velocities`]
+/// over the contacts in [`DdmProblem::equivalent_order`], bit for bit. Returns whether a
+/// correction was computed (otherwise `pseudo` is left zero).
+pub fn solve_and_correct(
+    nlgs: &Nlgs,
+    ddm: &DdmSettings,
+    partition: &Partition,
+    locals: &mut [LocalProblem],
+    bodies: &mut [SolverBody],
+    status: &mut [ContactStatus],
+    correction: Option<CorrectionPass>,
+) -> (SolveReport, DdmTimes, bool) {
     let mut times = DdmTimes::default();
     let mut pb: Vec<SolverBody> = partition
         .order
@@ -438,21 +480,18 @@ pub fn solve(
 
     // 1. Residual scale (in the equivalent order), then warm start.
     let mut q2 = 0.0;
-    for l in p
-        .sub
-        .iter()
-        .flatten()
-        .chain(p.groups.iter().flat_map(|g| g.locals.iter()))
-    {
+    for l in p.buckets().flat_map(|b| b.locals.iter()) {
         q2 += l.velocity(pb.as_slice()).length_squared();
     }
     let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
     let t = Instant::now();
-    for_subdomains(&mut p, &mut pb, starts, |l, _, v| nlgs.warm_start(l, v));
+    for_subdomains(&mut p, &mut pb, starts, |b, v| {
+        nlgs.warm_start(&b.locals, v)
+    });
     times.subdomains += t.elapsed().as_secs_f64();
     let t = Instant::now();
-    for_interface(&mut p, &mut pb, starts, |g, v| {
-        nlgs.warm_start(&g.locals, v)
+    for_interface(&mut p, &mut pb, starts, |b, v| {
+        nlgs.warm_start(&b.locals, v)
     });
     times.interface += t.elapsed().as_secs_f64();
 
@@ -467,10 +506,10 @@ pub fn solve(
             break;
         }
         let t = Instant::now();
-        let sub_sums = for_subdomains(&mut p, &mut pb, starts, |l, st, v| {
+        let sub_sums = for_subdomains(&mut p, &mut pb, starts, |b, v| {
             let mut sums = SweepSums::default();
             for _ in 0..ddm.inner_sweeps {
-                sums = nlgs.sweep(l, v, st);
+                sums = nlgs.sweep(&mut b.locals, v, &mut b.status);
             }
             sums
         });
@@ -478,8 +517,8 @@ pub fn solve(
         let t = Instant::now();
         let mut gamma_sums = vec![SweepSums::default(); p.groups.len()];
         for _ in 0..ddm.interface_sweeps {
-            gamma_sums = for_interface(&mut p, &mut pb, starts, |g, v| {
-                nlgs.sweep(&mut g.locals, v, &mut g.status)
+            gamma_sums = for_interface(&mut p, &mut pb, starts, |b, v| {
+                nlgs.sweep(&mut b.locals, v, &mut b.status)
             });
         }
         times.interface += t.elapsed().as_secs_f64();
@@ -506,27 +545,63 @@ pub fn solve(
     for (k, &i) in partition.order.iter().enumerate() {
         bodies[i as usize] = pb[k];
     }
-    let buckets = p
-        .sub
-        .iter()
-        .zip(&p.sub_origin)
-        .zip(&p.sub_status)
-        .map(|((l, o), s)| (l, o, s))
-        .chain(p.groups.iter().map(|g| (&g.locals, &g.origin, &g.status)));
-    for (l, o, st) in buckets {
-        for ((c, &idx), &stt) in l.iter().zip(o).zip(st) {
+    for b in p.buckets() {
+        for ((c, &idx), &stt) in b.locals.iter().zip(&b.origin).zip(&b.status) {
             locals[idx as usize].r = c.r;
             status[idx as usize] = stt;
         }
     }
-    (report, times)
+
+    // 4. Overlap correction on the same split.
+    let corrected = match correction {
+        Some(c) => correct(&mut p, partition, &pb, c),
+        None => false,
+    };
+    (report, times, corrected)
+}
+
+/// The pseudo-velocity sweeps of the overlap correction, on the subdomains in parallel then
+/// on Γ, `settings.sweeps` times.
+fn correct(
+    p: &mut DdmProblem,
+    partition: &Partition,
+    pb: &[SolverBody],
+    c: CorrectionPass,
+) -> bool {
+    let starts = &partition.starts;
+    let mut pv: Vec<SolverBody> = pb.iter().map(correction::at_rest).collect();
+    let (settings, h) = (c.settings, c.h);
+    let found = for_subdomains(p, &mut pv, starts, |b, _| {
+        correction::overlaps(settings, h, &b.locals, &mut b.overlaps)
+    })
+    .into_iter()
+    .chain(for_interface(p, &mut pv, starts, |b, _| {
+        correction::overlaps(settings, h, &b.locals, &mut b.overlaps)
+    }))
+    .any(|n| n > 0);
+    if found {
+        for _ in 0..settings.sweeps {
+            for_subdomains(p, &mut pv, starts, |b, v| {
+                correction::sweep(&b.locals, &mut b.overlaps, v)
+            });
+            for_interface(p, &mut pv, starts, |b, v| {
+                correction::sweep(&b.locals, &mut b.overlaps, v)
+            });
+        }
+    }
+    c.pseudo.clear();
+    c.pseudo.extend_from_slice(&pv);
+    for (k, &i) in partition.order.iter().enumerate() {
+        c.pseudo[i as usize] = pv[k];
+    }
+    found
 }
 
 /// Relative natural-map residual over all contacts, summed in the equivalent order.
 fn residual(nlgs: &Nlgs, p: &DdmProblem, pb: &[SolverBody], q: f64) -> f64 {
     let mut sum = 0.0;
-    for l in p.sub.iter().chain(p.groups.iter().map(|g| &g.locals)) {
-        sum += nlgs.residual_sum(l, pb);
+    for b in p.buckets() {
+        sum += nlgs.residual_sum(&b.locals, pb);
     }
     sum.sqrt() / q
 }
