@@ -80,6 +80,8 @@ pub struct PreparationSpec {
     /// NLGS tolerance (Quad norm) and sweep cap of the deposition.
     pub tolerance: f64,
     pub max_iterations: usize,
+    /// Alert distance of the contact detection (m), as `[simulation] alert` for the run.
+    pub alert: f64,
     /// Settling time after the fall (s).
     pub settle_time: f64,
     /// Settling time after the blocks are put in place (s): the bed is already settled, only
@@ -105,6 +107,7 @@ impl Default for PreparationSpec {
             dt: 5e-4,
             tolerance: 1e-2,
             max_iterations: 40,
+            alert: 4e-4,
             settle_time: 0.25,
             block_settle_time: 0.2,
             rest_speed: 0.05,
@@ -141,6 +144,7 @@ impl PreparationSpec {
             100.0,
             "s",
         )?;
+        check_range("preparation.alert", self.alert, 0.0, 0.1, "m")?;
         check_range("preparation.rest_speed", self.rest_speed, 1e-6, 10.0, "m/s")?;
         check_range(
             "preparation.max_extra_time",
@@ -362,6 +366,7 @@ fn prepare_from(
 
     let settings = StepSettings {
         dt: prep.dt,
+        alert: prep.alert,
         solver: SolverSettings {
             tolerance: prep.tolerance,
             max_iterations: prep.max_iterations,

@@ -7,7 +7,8 @@
 //! 2. For k = 1, 2, … up to `max_iterations`, sweep α in the given order:
 //!    1. `u = H_αᵀ V`, then `u_f = u − W_αα r_α` (velocity without α's own impulse);
 //!    2. if `g_α + h θ u_f,n > 0` (gap prediction): `r̂ = 0`; else `r̂` = exact local
-//!       Signorini-Coulomb solution for `(W_αα, u_f, μ_α)` ([`crate::laws::solve_local`]);
+//!       Signorini-Coulomb solution for `(W_αα, u_f, μ_α)`, a slide's Newton iteration starting
+//!       from the direction of `r_α` ([`crate::laws::coulomb::solve_local_from`]);
 //!    3. relax `r_new = (1 − ω) r_α + ω r̂`, apply `V += M⁻¹ H_α (r_new − r_α)`, `r_α = r_new`;
 //!    4. accumulate `‖W_αα Δr_α‖²` and `‖W_αα r_α‖²` for the Quad norm.
 //! 3. Every `check_every` sweeps, evaluate the chosen norm; stop when it is below `tolerance`.
@@ -15,7 +16,7 @@
 
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::{ConvergenceNorm, SolverSettings};
-use crate::laws::coulomb::{natural_map_residual, solve_local};
+use crate::laws::coulomb::{natural_map_residual, solve_local_from};
 use crate::laws::ContactStatus;
 use crate::math::DVec3;
 use serde::{Deserialize, Serialize};
@@ -78,11 +79,17 @@ impl Nlgs {
         sums: &mut SweepSums,
     ) -> ContactStatus {
         let u = c.velocity(v);
-        let uf = u - c.w * c.r;
+        let unloaded = c.r == DVec3::ZERO;
+        let uf = if unloaded { u } else { u - c.w * c.r };
         let (rhat, status) = if c.gap + self.h_theta * uf.x > 0.0 {
+            // An open contact that stays open (about 40 % of the updates in a dense bed):
+            // nothing to apply, nothing to add to the sums.
+            if unloaded {
+                return ContactStatus::NoContact;
+            }
             (DVec3::ZERO, ContactStatus::NoContact)
         } else {
-            solve_local(&c.w, &c.w_inv, uf, c.mu)
+            solve_local_from(&c.w, &c.w_inv, uf, c.mu, c.r)
         };
         let om = self.settings.relaxation;
         let rnew = if om == 1.0 {
