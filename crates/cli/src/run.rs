@@ -104,8 +104,8 @@ fn job(a: &RunArgs) -> Result<Job, String> {
             eprintln!(
                 "preparing the ballast bed ({} block(s), {} m × {} m), or reading it from the cache",
                 s.track.blocks,
-                s.track.length(),
-                s.track.width
+                short(s.track.length()),
+                short(s.track.width)
             );
         }
         let model = s
@@ -336,4 +336,22 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
         );
     }
     Ok(())
+}
+
+/// A length for a message: millimetre precision, no trailing zeros (3.6, not
+/// 3.6000000000000005).
+fn short(x: f64) -> String {
+    let s = format!("{x:.3}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn lengths_in_messages_are_short() {
+        assert_eq!(super::short(3.6000000000000005), "3.6");
+        assert_eq!(super::short(2.0), "2");
+        assert_eq!(super::short(0.6), "0.6");
+        assert_eq!(super::short(0.0125), "0.013");
+    }
 }
