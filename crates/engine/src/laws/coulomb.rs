@@ -99,7 +99,8 @@
 //! When `μ‖w‖ ≥ Wₙₙ`, `D` changes sign on the circle and several admissible roots (and a stick
 //! solution besides) may coexist: the discrete Coulomb problem is then non-unique, which is
 //! known for large `μ` and strong coupling (Painlevé-like jamming). Any of them satisfies the
-//! law; the order above prefers no contact, then stick, then the predicted sliding branch.
+//! law; the order above prefers no contact, then stick, then the sliding branch of the previous
+//! direction (warm start), then the predicted one.
 //! Should no admissible root be found (near tangencies of `g`, or an ill-posed input such as a
 //! `W` that is not positive definite), the solver returns whichever of `P_K(−W⁻¹q)`, the
 //! frictionless impulse `(a/Wₙₙ, 0, 0)` and the impulses of the computed roots projected on
