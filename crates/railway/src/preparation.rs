@@ -107,7 +107,7 @@ impl Default for PreparationSpec {
             dt: 5e-4,
             tolerance: 1e-2,
             max_iterations: 40,
-            alert: 4e-4,
+            alert: crate::scenario::DEFAULT_ALERT,
             settle_time: 0.25,
             block_settle_time: 0.2,
             rest_speed: 0.05,

@@ -66,10 +66,7 @@ impl Default for TrackSimulation {
         TrackSimulation {
             dt: 8e-4,
             theta: 0.5,
-            // The speculative margins already cover each body's own motion: 0.4 mm rather
-            // than 1 mm leaves 16 % fewer contacts (fewer idle ones) with the same overlaps
-            // (their 99th and 99.9th percentiles) on the default cycle; see BENCHMARKS.md.
-            alert: 4e-4,
+            alert: DEFAULT_ALERT,
             steps: None,
             // Every 20 ms and 0.1 s of the default cycle.
             output_interval: 25,
@@ -182,6 +179,12 @@ fn merge_solver(table: Option<toml::Table>) -> Result<SolverSettings, String> {
         .try_into()
         .map_err(|e: toml::de::Error| format!("[solver]: {}", e.message()))
 }
+
+/// Default alert distance of track runs and of their preparation (m). The speculative margins
+/// already cover each body's own motion: 0.4 mm rather than 1 mm leaves 16 % fewer contacts
+/// (fewer idle ones) with the same overlaps (their 99th and 99.9th percentiles) on the
+/// default cycle; see BENCHMARKS.md.
+pub const DEFAULT_ALERT: f64 = 4e-4;
 
 /// The default job's domain decomposition: 2 × 2 contact-balanced boxes (along and across the
 /// track), more subdomains than the 2 cores this job is sized for. The split depends on the
