@@ -96,6 +96,7 @@ pub struct World {
     solver_bodies: Vec<SolverBody>,
     free_w: Vec<DVec3>,
     pseudo: Vec<SolverBody>,
+    ddm_workspace: ddm::DdmWorkspace,
 }
 
 impl World {
@@ -124,6 +125,7 @@ impl World {
             solver_bodies: Vec::new(),
             free_w: Vec::new(),
             pseudo: Vec::new(),
+            ddm_workspace: ddm::DdmWorkspace::default(),
         }
     }
 
@@ -267,6 +269,7 @@ impl World {
             Some(d) => {
                 let partition = self.partition(d);
                 let (report, t, corrected) = ddm::solve_and_correct(
+                    &mut self.ddm_workspace,
                     &nlgs,
                     d,
                     &partition,

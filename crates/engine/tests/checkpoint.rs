@@ -645,6 +645,7 @@ fn checkpoints_cover_all_state_fields() {
             "solver_bodies",
             "free_w",
             "pseudo",
+            "ddm_workspace",
         ],
         "World",
     );

@@ -46,7 +46,14 @@ pub struct Detector {
     /// Face hints of the previous step's polyhedron pairs, sorted by pair (temporal coherence;
     /// they speed the narrow phase up and never change its results).
     hints: Vec<((u32, u32), FaceHint)>,
+    /// This step's hint per pair, and the narrow phase's results (buffers kept across steps:
+    /// megabytes allocated afresh every step cost page faults).
+    pair_hints: Vec<FaceHint>,
+    results: Vec<NarrowResult>,
 }
+
+/// A pair's narrow-phase outcome: bodies (body 1 first), manifold, and the hint for next step.
+type NarrowResult = (u32, u32, Option<Manifold>, FaceHint);
 
 impl Detector {
     /// World view of polyhedron `i` (valid after [`Detector::detect`] refreshed the cache).
@@ -195,18 +202,18 @@ impl Detector {
         pairs.sort_unstable();
         // Last step's hint of each pair, by a merge of the two sorted lists.
         let mut previous = self.hints.iter().peekable();
-        let hints: Vec<FaceHint> = pairs
-            .iter()
-            .map(|pair| {
-                while previous.next_if(|(p, _)| p < pair).is_some() {}
-                previous
-                    .next_if(|(p, _)| p == pair)
-                    .map_or(FaceHint::NONE, |&(_, h)| h)
-            })
-            .collect();
+        let mut hints = std::mem::take(&mut self.pair_hints);
+        hints.clear();
+        hints.extend(pairs.iter().map(|pair| {
+            while previous.next_if(|(p, _)| p < pair).is_some() {}
+            previous
+                .next_if(|(p, _)| p == pair)
+                .map_or(FaceHint::NONE, |&(_, h)| h)
+        }));
+        let mut results = std::mem::take(&mut self.results);
         let this = &*self;
         let margins = &self.margins;
-        let results: Vec<(u32, u32, Option<Manifold>, FaceHint)> = pairs
+        pairs
             .par_iter()
             .zip(hints.par_iter())
             .with_min_len(32)
@@ -239,7 +246,7 @@ impl Detector {
                     (None, None) => (i, j, None, FaceHint::NONE),
                 }
             })
-            .collect();
+            .collect_into_vec(&mut results);
         self.hints.clear();
         self.hints.extend(
             pairs
@@ -248,8 +255,8 @@ impl Detector {
                 .filter(|(_, r)| r.3 != FaceHint::NONE)
                 .map(|(&p, r)| (p, r.3)),
         );
-        let manifolds = results.into_iter().map(|(i, j, m, _)| (i, j, m));
-        for (b1, b2, m) in manifolds {
+        for (b1, b2, m, _) in &results {
+            let (b1, b2) = (*b1, *b2);
             if let Some(m) = m {
                 for p in &m.points {
                     out.push(RawContact {
@@ -263,6 +270,8 @@ impl Detector {
             }
         }
         self.pairs = pairs;
+        self.pair_hints = hints;
+        self.results = results;
     }
 }
 

@@ -44,6 +44,21 @@ pub struct DdmSettings {
     pub balance: Balance,
     /// Solve the interface in parallel (coloured groups) rather than sequentially.
     pub parallel_interface: bool,
+    /// A phase (the subdomain sweeps, or one colour of interface groups) with fewer contacts
+    /// than this runs on the calling thread: waking workers would cost more than the sweep.
+    /// Scheduling only: the pieces of a phase touch disjoint bodies, so results are bit-identical
+    /// for any value (0 = always dispatch, as tests do to exercise the parallel paths).
+    #[serde(skip_serializing_if = "is_default_min_parallel")]
+    pub min_parallel_contacts: usize,
+}
+
+/// Default of [`DdmSettings::min_parallel_contacts`].
+pub const MIN_PARALLEL_CONTACTS: usize = 4096;
+
+/// Left out of the settings' JSON when at its default, so that checkpoints written before the
+/// field existed still resume (it never changes results).
+fn is_default_min_parallel(n: &usize) -> bool {
+    *n == MIN_PARALLEL_CONTACTS
 }
 
 impl Default for DdmSettings {
@@ -54,6 +69,7 @@ impl Default for DdmSettings {
             interface_sweeps: 1,
             balance: Balance::Contacts,
             parallel_interface: true,
+            min_parallel_contacts: MIN_PARALLEL_CONTACTS,
         }
     }
 }
@@ -109,6 +125,12 @@ impl Bucket {
         self.status.push(ContactStatus::NoContact);
     }
 
+    fn clear(&mut self) {
+        self.locals.clear();
+        self.origin.clear();
+        self.status.clear();
+    }
+
     /// Number of contacts.
     pub fn len(&self) -> usize {
         self.locals.len()
@@ -131,29 +153,48 @@ pub struct InterfaceGroup {
 }
 
 /// The contacts bucketed by subdomain and interface group, bodies in solver numbering.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct DdmProblem {
     pub sub: Vec<Bucket>,
     /// Sorted by `(colour, pair)`; a single group with pair `(STATIC, STATIC)` when the
     /// interface is solved sequentially.
     pub groups: Vec<InterfaceGroup>,
     pub colours: usize,
+    /// Scratch of [`DdmProblem::rebuild`]: each subdomain's contacts (caller's indices).
+    members: Vec<Vec<u32>>,
 }
 
 impl DdmProblem {
     /// Buckets `locals` (bodies in the original numbering) by the partition.
     pub fn build(partition: &Partition, locals: &[LocalProblem], parallel_interface: bool) -> Self {
+        let mut p = DdmProblem::default();
+        p.rebuild(partition, locals, parallel_interface);
+        p
+    }
+
+    /// [`DdmProblem::build`] into the buffers of a previous step (no reallocation once they
+    /// have grown); the subdomains' buckets are filled in parallel, each in the caller's order.
+    pub fn rebuild(
+        &mut self,
+        partition: &Partition,
+        locals: &[LocalProblem],
+        parallel_interface: bool,
+    ) {
         let k = partition.count();
-        let mut sub = vec![Bucket::default(); k];
-        let mut gamma: Vec<((u32, u32), u32, LocalProblem)> = Vec::new();
+        let renumber = |c: &LocalProblem| {
+            let mut l = *c;
+            l.body1 = partition.new_index[c.body1 as usize];
+            l.body2 = partition.new_index[c.body2 as usize];
+            l
+        };
+        self.members.resize_with(k, Vec::new);
+        self.members.iter_mut().for_each(Vec::clear);
+        let mut gamma: Vec<((u32, u32), u32)> = Vec::new();
         for (idx, c) in locals.iter().enumerate() {
             let (s1, s2) = (
                 partition.subdomain[c.body1 as usize],
                 partition.subdomain[c.body2 as usize],
             );
-            let mut l = *c;
-            l.body1 = partition.new_index[c.body1 as usize];
-            l.body2 = partition.new_index[c.body2 as usize];
             let owner = match (s1, s2) {
                 (a, b) if a == b => Some(a),
                 (STATIC, b) => Some(b),
@@ -161,7 +202,7 @@ impl DdmProblem {
                 _ => None,
             };
             match owner {
-                Some(e) if e != STATIC => sub[e as usize].push(l, idx as u32),
+                Some(e) if e != STATIC => self.members[e as usize].push(idx as u32),
                 // Two static bodies never make a contact (detection skips them); keep it in Γ.
                 _ => {
                     let pair = if parallel_interface {
@@ -169,26 +210,37 @@ impl DdmProblem {
                     } else {
                         (STATIC, STATIC)
                     };
-                    gamma.push((pair, idx as u32, l));
+                    gamma.push((pair, idx as u32));
                 }
             }
         }
+        self.sub.resize_with(k, Bucket::default);
+        self.sub
+            .par_iter_mut()
+            .zip(self.members.par_iter())
+            .for_each(|(bucket, members)| {
+                bucket.clear();
+                for &idx in members {
+                    bucket.push(renumber(&locals[idx as usize]), idx);
+                }
+            });
         // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily.
-        gamma.sort_by_key(|(pair, idx, _)| (*pair, *idx));
-        let mut groups: Vec<InterfaceGroup> = Vec::new();
-        for (pair, idx, l) in gamma {
-            if groups.last().is_none_or(|g| g.pair != pair) {
-                groups.push(InterfaceGroup {
+        gamma.sort_unstable();
+        self.groups.clear();
+        for (pair, idx) in gamma {
+            if self.groups.last().is_none_or(|g| g.pair != pair) {
+                self.groups.push(InterfaceGroup {
                     pair,
                     colour: 0,
                     bucket: Bucket::default(),
                 });
             }
-            groups.last_mut().expect("pushed above").bucket.push(l, idx);
+            let group = self.groups.last_mut().expect("pushed above");
+            group.bucket.push(renumber(&locals[idx as usize]), idx);
         }
         let mut used: Vec<Vec<usize>> = vec![Vec::new(); k];
         let mut colours = 0;
-        for g in groups.iter_mut() {
+        for g in self.groups.iter_mut() {
             if g.pair.0 == STATIC {
                 g.colour = 0;
                 colours = 1;
@@ -203,12 +255,8 @@ impl DdmProblem {
             g.colour = c;
             colours = colours.max(c + 1);
         }
-        groups.sort_by_key(|g| (g.colour, g.pair));
-        DdmProblem {
-            sub,
-            groups,
-            colours,
-        }
+        self.groups.sort_by_key(|g| (g.colour, g.pair));
+        self.colours = colours;
     }
 
     /// The buckets in the equivalent order: subdomains, then Γ by colour and group.
@@ -296,23 +344,19 @@ fn split<'a>(
     (out, rest)
 }
 
-/// Below this many contacts a phase runs on the calling thread: dispatching tasks would cost
-/// more than the sweep. Subdomains (and the groups of one colour) touch disjoint bodies, so
-/// running them one after the other gives bit-identical results.
-const PARALLEL_MIN_CONTACTS: usize = 4096;
-
 /// Runs `f` on every subdomain with its view, in parallel when worth it; results in subdomain
 /// order.
 fn for_subdomains<T: Send>(
     p: &mut DdmProblem,
     pb: &mut [SolverBody],
     starts: &[usize],
+    min_parallel: usize,
     f: impl Fn(&mut Bucket, &mut SubView) -> T + Sync,
 ) -> Vec<T> {
     let k = starts.len() - 1;
     let static_start = starts[k] as u32;
     let (slices, statics) = split(pb, starts);
-    if p.sub.iter().map(Bucket::len).sum::<usize>() < PARALLEL_MIN_CONTACTS {
+    if p.sub.iter().map(Bucket::len).sum::<usize>() < min_parallel {
         return p
             .sub
             .iter_mut()
@@ -345,12 +389,14 @@ fn for_subdomains<T: Send>(
         .collect()
 }
 
-/// Runs `f` on every interface group, colour after colour, the groups of a colour in parallel;
-/// results in group order.
+/// Runs `f` on every interface group, colour after colour, the groups of a colour in parallel
+/// (on the calling thread when the colour has fewer than `min_parallel` contacts: they touch
+/// disjoint bodies, so the order does not matter); results in group order.
 fn for_interface<T: Send>(
     p: &mut DdmProblem,
     pb: &mut [SolverBody],
     starts: &[usize],
+    min_parallel: usize,
     f: impl Fn(&mut Bucket, &mut dyn BodyAccessDyn) -> T + Sync,
 ) -> Vec<T> {
     let mut out = Vec::with_capacity(p.groups.len());
@@ -358,7 +404,13 @@ fn for_interface<T: Send>(
         let sequential = p
             .groups
             .iter()
-            .any(|g| g.colour == colour && g.pair.0 == STATIC);
+            .any(|g| g.colour == colour && g.pair.0 == STATIC)
+            || p.groups
+                .iter()
+                .filter(|g| g.colour == colour)
+                .map(|g| g.bucket.len())
+                .sum::<usize>()
+                < min_parallel;
         if sequential {
             for g in p.groups.iter_mut().filter(|g| g.colour == colour) {
                 out.push(f(&mut g.bucket, &mut FullView(pb)));
@@ -441,7 +493,9 @@ pub fn solve(
     bodies: &mut [SolverBody],
     status: &mut [ContactStatus],
 ) -> (SolveReport, DdmTimes) {
-    let (report, times, _) = solve_and_correct(nlgs, ddm, partition, locals, bodies, status, None);
+    let mut ws = DdmWorkspace::default();
+    let (report, times, _) =
+        solve_and_correct(&mut ws, nlgs, ddm, partition, locals, bodies, status, None);
     (report, times)
 }
 
@@ -454,12 +508,29 @@ pub struct CorrectionPass<'a> {
     pub pseudo: &'a mut Vec<SolverBody>,
 }
 
+/// Buffers of [`solve_and_correct`] kept from one step to the next, so that a step allocates
+/// nothing once they have grown (fresh megabytes every step cost page faults).
+#[derive(Clone, Debug, Default)]
+pub struct DdmWorkspace {
+    problem: DdmProblem,
+    /// Bodies in solver numbering.
+    pb: Vec<SolverBody>,
+    /// Pseudo-velocities of the correction, solver numbering.
+    pv: Vec<SolverBody>,
+    /// Per-contact terms of a sum, in the equivalent order.
+    terms: Vec<f64>,
+    /// Per caller contact: its bucket (in the equivalent order) and its place there.
+    slot: Vec<(u32, u32)>,
+}
+
 /// [`solve`], then the overlap correction ([`super::correction`]) on the same subdomains and
 /// interface groups: each of its sweeps runs the subdomains in parallel, then Γ colour by
 /// colour, so the pseudo-velocities equal those of [`super::correction::pseudo_velocities`]
 /// over the contacts in [`DdmProblem::equivalent_order`], bit for bit. Returns whether a
 /// correction was computed (otherwise `pseudo` is left zero).
+#[allow(clippy::too_many_arguments)]
 pub fn solve_and_correct(
+    ws: &mut DdmWorkspace,
     nlgs: &Nlgs,
     ddm: &DdmSettings,
     partition: &Partition,
@@ -469,28 +540,60 @@ pub fn solve_and_correct(
     correction: Option<CorrectionPass>,
 ) -> (SolveReport, DdmTimes, bool) {
     let mut times = DdmTimes::default();
-    let mut pb: Vec<SolverBody> = partition
-        .order
-        .iter()
-        .map(|&i| bodies[i as usize])
-        .collect();
-    let mut p = DdmProblem::build(partition, locals, ddm.parallel_interface);
+    let min_parallel = ddm.min_parallel_contacts;
+    let DdmWorkspace {
+        problem: p,
+        pb,
+        pv,
+        terms,
+        slot,
+    } = ws;
+    pb.clear();
+    pb.par_extend(partition.order.par_iter().map(|&i| bodies[i as usize]));
+    p.rebuild(partition, locals, ddm.parallel_interface);
     let starts = &partition.starts;
     let mut report = SolveReport::default();
 
-    // 1. Residual scale (in the equivalent order), then warm start.
-    let mut q2 = 0.0;
-    for l in p.buckets().flat_map(|b| b.locals.iter()) {
-        q2 += l.velocity(pb.as_slice()).length_squared();
+    // 1. Residual scale (terms in parallel, summed in the equivalent order), then warm start.
+    let buckets: Vec<&Bucket> = p.buckets().collect();
+    terms.clear();
+    terms.resize(locals.len(), 0.0);
+    {
+        let mut chunks = Vec::with_capacity(buckets.len());
+        let mut rest = terms.as_mut_slice();
+        for b in &buckets {
+            let (c, r) = rest.split_at_mut(b.len());
+            chunks.push(c);
+            rest = r;
+        }
+        let pb = pb.as_slice();
+        buckets
+            .par_iter()
+            .zip(chunks.into_par_iter())
+            .for_each(|(b, chunk)| {
+                for (t, l) in chunk.iter_mut().zip(&b.locals) {
+                    *t = l.velocity(pb).length_squared();
+                }
+            });
     }
+    let q2: f64 = terms.iter().fold(0.0, |s, &t| s + t);
     let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
+    // Where each caller contact lives, for the parallel write-back.
+    slot.clear();
+    slot.resize(locals.len(), (0, 0));
+    for (bi, b) in buckets.iter().enumerate() {
+        for (k, &idx) in b.origin.iter().enumerate() {
+            slot[idx as usize] = (bi as u32, k as u32);
+        }
+    }
+    drop(buckets);
     let t = Instant::now();
-    for_subdomains(&mut p, &mut pb, starts, |b, v| {
+    for_subdomains(p, pb, starts, min_parallel, |b, v| {
         nlgs.warm_start(&b.locals, v)
     });
     times.subdomains += t.elapsed().as_secs_f64();
     let t = Instant::now();
-    for_interface(&mut p, &mut pb, starts, |b, v| {
+    for_interface(p, pb, starts, min_parallel, |b, v| {
         nlgs.warm_start(&b.locals, v)
     });
     times.interface += t.elapsed().as_secs_f64();
@@ -506,7 +609,7 @@ pub fn solve_and_correct(
             break;
         }
         let t = Instant::now();
-        let sub_sums = for_subdomains(&mut p, &mut pb, starts, |b, v| {
+        let sub_sums = for_subdomains(p, pb, starts, min_parallel, |b, v| {
             let mut sums = SweepSums::default();
             for _ in 0..ddm.inner_sweeps {
                 sums = nlgs.sweep(&mut b.locals, v, &mut b.status);
@@ -517,7 +620,7 @@ pub fn solve_and_correct(
         let t = Instant::now();
         let mut gamma_sums = vec![SweepSums::default(); p.groups.len()];
         for _ in 0..ddm.interface_sweeps {
-            gamma_sums = for_interface(&mut p, &mut pb, starts, |b, v| {
+            gamma_sums = for_interface(p, pb, starts, min_parallel, |b, v| {
                 nlgs.sweep(&mut b.locals, v, &mut b.status)
             });
         }
@@ -531,7 +634,7 @@ pub fn solve_and_correct(
         if j % s.check_every == 0 || j == s.max_iterations {
             let measure = match s.norm {
                 ConvergenceNorm::Quad => report.quad,
-                ConvergenceNorm::NaturalMap => residual(nlgs, &p, &pb, q),
+                ConvergenceNorm::NaturalMap => residual(nlgs, p, pb, q),
             };
             if measure <= s.tolerance {
                 report.converged = true;
@@ -539,22 +642,31 @@ pub fn solve_and_correct(
             }
         }
     }
-    report.residual = residual(nlgs, &p, &pb, q);
+    report.residual = residual(nlgs, p, pb, q);
 
-    // 3. Back to the caller's numbering.
-    for (k, &i) in partition.order.iter().enumerate() {
-        bodies[i as usize] = pb[k];
-    }
-    for b in p.buckets() {
-        for ((c, &idx), &stt) in b.locals.iter().zip(&b.origin).zip(&b.status) {
-            locals[idx as usize].r = c.r;
-            status[idx as usize] = stt;
-        }
-    }
+    // 3. Back to the caller's numbering, in parallel over the caller's bodies and contacts.
+    let (new_index, pb_ref) = (&partition.new_index, pb.as_slice());
+    bodies
+        .par_iter_mut()
+        .with_min_len(1024)
+        .zip(new_index.par_iter())
+        .for_each(|(b, &k)| *b = pb_ref[k as usize]);
+    let buckets: Vec<&Bucket> = p.buckets().collect();
+    locals
+        .par_iter_mut()
+        .with_min_len(1024)
+        .zip(status.par_iter_mut())
+        .zip(slot.par_iter())
+        .for_each(|((c, st), &(bi, k))| {
+            let b = buckets[bi as usize];
+            c.r = b.locals[k as usize].r;
+            *st = b.status[k as usize];
+        });
+    drop(buckets);
 
     // 4. Overlap correction on the same split.
     let corrected = match correction {
-        Some(c) => correct(&mut p, partition, &pb, c),
+        Some(c) => correct(p, partition, pb, pv, min_parallel, c),
         None => false,
     };
     (report, times, corrected)
@@ -566,42 +678,77 @@ fn correct(
     p: &mut DdmProblem,
     partition: &Partition,
     pb: &[SolverBody],
+    pv: &mut Vec<SolverBody>,
+    min_parallel: usize,
     c: CorrectionPass,
 ) -> bool {
     let starts = &partition.starts;
-    let mut pv: Vec<SolverBody> = pb.iter().map(correction::at_rest).collect();
+    pv.clear();
+    pv.par_extend(pb.par_iter().map(correction::at_rest));
     let (settings, h) = (c.settings, c.h);
-    let found = for_subdomains(p, &mut pv, starts, |b, _| {
+    let found = for_subdomains(p, pv, starts, min_parallel, |b, _| {
         correction::overlaps(settings, h, &b.locals, &mut b.overlaps)
     })
     .into_iter()
-    .chain(for_interface(p, &mut pv, starts, |b, _| {
+    .chain(for_interface(p, pv, starts, min_parallel, |b, _| {
         correction::overlaps(settings, h, &b.locals, &mut b.overlaps)
     }))
     .any(|n| n > 0);
     if found {
         for _ in 0..settings.sweeps {
-            for_subdomains(p, &mut pv, starts, |b, v| {
+            for_subdomains(p, pv, starts, min_parallel, |b, v| {
                 correction::sweep(&b.locals, &mut b.overlaps, v)
             });
-            for_interface(p, &mut pv, starts, |b, v| {
+            for_interface(p, pv, starts, min_parallel, |b, v| {
                 correction::sweep(&b.locals, &mut b.overlaps, v)
             });
         }
     }
+    let pv = pv.as_slice();
     c.pseudo.clear();
-    c.pseudo.extend_from_slice(&pv);
-    for (k, &i) in partition.order.iter().enumerate() {
-        c.pseudo[i as usize] = pv[k];
-    }
+    c.pseudo.par_extend(
+        partition
+            .new_index
+            .par_iter()
+            .with_min_len(1024)
+            .map(|&k| pv[k as usize]),
+    );
     found
 }
 
-/// Relative natural-map residual over all contacts, summed in the equivalent order.
+/// Relative natural-map residual over all contacts: each bucket's sum in parallel, the sums
+/// added in the equivalent order.
 fn residual(nlgs: &Nlgs, p: &DdmProblem, pb: &[SolverBody], q: f64) -> f64 {
+    let buckets: Vec<&Bucket> = p.buckets().collect();
+    let sums: Vec<f64> = buckets
+        .par_iter()
+        .map(|b| nlgs.residual_sum(&b.locals, pb))
+        .collect();
     let mut sum = 0.0;
-    for b in p.buckets() {
-        sum += nlgs.residual_sum(&b.locals, pb);
+    for s in sums {
+        sum += s;
     }
     sum.sqrt() / q
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The scheduling threshold stays out of the settings' JSON at its default (checkpoints
+    /// compare that JSON, so older runs still resume) and round-trips otherwise.
+    #[test]
+    fn default_threshold_is_not_serialised() {
+        let d = DdmSettings::default();
+        let json = serde_json::to_string(&d).unwrap();
+        assert!(!json.contains("min_parallel_contacts"), "{json}");
+        assert_eq!(serde_json::from_str::<DdmSettings>(&json).unwrap(), d);
+        let zero = DdmSettings {
+            min_parallel_contacts: 0,
+            ..d
+        };
+        let json = serde_json::to_string(&zero).unwrap();
+        assert!(json.contains("\"min_parallel_contacts\":0"), "{json}");
+        assert_eq!(serde_json::from_str::<DdmSettings>(&json).unwrap(), zero);
+    }
 }
