@@ -103,6 +103,7 @@ impl World {
     /// A world at t = 0.
     /// Kinematic bodies start with their driver's velocity at t = 0.
     pub fn new(mut bodies: BodySet, friction: FrictionTable, settings: StepSettings) -> Self {
+        bodies.compact_shapes();
         for i in 0..bodies.len() {
             if let (BodyKind::Kinematic, Some(d)) = (bodies.kind[i], &bodies.driver[i]) {
                 let (v, w) = d.velocity(0.0);
