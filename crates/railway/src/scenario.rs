@@ -519,4 +519,18 @@ mod tests {
         assert_eq!(d.ddm.as_ref().unwrap().subdomains, [2, 2, 1]);
         assert_eq!(d.steps(), 2205);
     }
+
+    /// The paper example with 740 fixed sweeps is the paper preset but for its solver stop
+    /// (same bed, so the same cache entry).
+    #[test]
+    fn paper_740_example_is_the_paper_preset() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/paper_740.toml");
+        let text = std::fs::read_to_string(path).unwrap();
+        let file = TrackScenario::from_toml(&text).unwrap();
+        let mut paper = TrackScenario::paper_preset();
+        assert_eq!(file.solver.max_iterations, 740);
+        assert!(file.solver.tolerance < 1e-20);
+        paper.solver = file.solver.clone();
+        assert_eq!(file, paper);
+    }
 }
