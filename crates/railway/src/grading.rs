@@ -169,6 +169,26 @@ impl GradingCurve {
         )
     }
 
+    /// Railway ballast 31.5/50 on the coarse side of the EN 13450 bands, for the paper preset:
+    ///
+    /// | sieve (mm) | band (%) | used (%) |
+    /// |-----------:|---------:|---------:|
+    /// | 22.4       | 0–3      | 1.5      |
+    /// | 31.5       | 1–25     | 10       |
+    /// | 40         | 30–65    | 42       |
+    /// | 50         | 70–99    | 82       |
+    /// | 63         | 100      | 100      |
+    ///
+    /// The paper's 88,100 grains fill its 3.6 m × 2 m × 0.56 m bed: 8 % fewer (so larger) grains
+    /// than the middle of the bands gives at the same compacity (95,096 kept of 108,326
+    /// generated); this table generates 99,570 for the same solid volume, about 87,400 kept.
+    pub fn en13450_31_5_50_coarse() -> Self {
+        Self::standard(
+            &[22.4, 31.5, 40.0, 50.0, 63.0],
+            &[0.015, 0.10, 0.42, 0.82, 1.0],
+        )
+    }
+
     /// Railway ballast 25/50, **an assumption of ours, not a table of the standard** (which
     /// was not available to us): the end bands of the EN 13450 format at the smaller lower size
     /// and at the upper size of the 31.5/50 grading, middle of each band, and no intermediate
@@ -422,6 +442,7 @@ mod tests {
     fn standard_curves_validate_and_match_their_tables() {
         for c in [
             GradingCurve::en13450_31_5_50(),
+            GradingCurve::en13450_31_5_50_coarse(),
             GradingCurve::en13450_25_50(),
         ] {
             let again = table(c.sieves_mm(), c.passing()).expect("standard table validates");

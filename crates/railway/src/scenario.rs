@@ -16,7 +16,7 @@
 //! width = 1.0
 //!
 //! [ballast]             # see GrainSpec: grading, vertices, elongation, flatness, density
-//! grading = "31.5/50"   # or "25/50", or { sieves_mm = [...], passing = [...] }
+//! grading = "31.5/50"   # or "31.5/50 coarse", "25/50", or { sieves_mm = [...], passing = [...] }
 //! seed = 1
 //!
 //! [preparation]         # see PreparationSpec
@@ -226,9 +226,12 @@ impl TrackScenario {
     /// The paper's case: 7 blocks on a 3.6 m × 2 m × 0.56 m bed (0.514 m spacing, the paper's
     /// length for 7 blocks; 0.34 m of ballast under the soffits), tamping of the 4th block,
     /// dt = 2e-4 s, μ = 1 (0.8 against walls), DDM 7×1×1 (7 slabs along the track, x) with
-    /// n = m = 1, at most 740 sweeps.
+    /// n = m = 1, at most 740 sweeps. The ballast is 31.5/50 on the coarse side of the bands
+    /// ([`GradingCurve::en13450_31_5_50_coarse`]), so that the bed holds the paper's number of
+    /// grains (88,100): the middle of the bands gives 95,096.
     pub fn paper_preset() -> Self {
         let mut s = Self::default_preset();
+        s.ballast.grains.grading = GradingCurve::en13450_31_5_50_coarse();
         s.track = TrackSpec {
             blocks: 7,
             spacing: 3.6 / 7.0,
@@ -278,12 +281,14 @@ impl TrackScenario {
                     GradingInput::Table(c) => c,
                     GradingInput::Named(n) => match n.as_str() {
                         "31.5/50" => GradingCurve::en13450_31_5_50(),
+                        "31.5/50 coarse" => GradingCurve::en13450_31_5_50_coarse(),
                         "25/50" => GradingCurve::en13450_25_50(),
                         _ => {
                             return Err(refuse(
                                 "ballast.grading",
                                 n,
-                                "\"31.5/50\", \"25/50\" or a table { sieves_mm = [...], passing = [...] }",
+                                "\"31.5/50\", \"31.5/50 coarse\", \"25/50\" or a table \
+                                 { sieves_mm = [...], passing = [...] }",
                             )
                             .to_string())
                         }
