@@ -320,7 +320,7 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     }
     if stats.not_converged > 0 {
         eprintln!(
-            "warning: NLGS did not reach tolerance {} in {} of {} steps (max residual {:.3e})",
+            "warning: NLGS did not reach tolerance {:e} in {} of {} steps (max residual {:.3e})",
             world.settings.solver.tolerance, stats.not_converged, stats.steps, stats.max_residual
         );
     }
