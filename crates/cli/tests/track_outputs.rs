@@ -123,35 +123,12 @@ struct Runs {
     logs: Vec<String>,
 }
 
-/// A scratch folder, removed when the test is done with it (kept when the test fails, to look
-/// at).
-struct TmpDir(PathBuf);
-
-impl Drop for TmpDir {
-    fn drop(&mut self) {
-        if !std::thread::panicking() {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
-    }
-}
-
-impl AsRef<std::path::Path> for TmpDir {
-    fn as_ref(&self) -> &std::path::Path {
-        &self.0
-    }
-}
-
-impl std::ops::Deref for TmpDir {
-    type Target = PathBuf;
-    fn deref(&self) -> &PathBuf {
-        &self.0
-    }
-}
-
-fn tmp(name: &str) -> TmpDir {
+/// A scratch folder. Left in place: the runs in it are shared by every test of this file (a
+/// static fixture, never dropped).
+fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("ballast-track-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
-    TmpDir(d)
+    d
 }
 
 fn summary(dir: &Path) -> Result<Value, String> {
