@@ -90,7 +90,21 @@ enum Command {
         /// Partitions of the scaling study.
         #[arg(long, value_delimiter = ',', value_parser = parse_subdomains, default_value = "2x1x1,2x2x1,4x4x1")]
         partitions: Vec<[usize; 3]>,
+        /// Scaling study: thread counts to time, comma-separated, e.g. 1,2,4,8,16 (1 is
+        /// always timed: speedups are against it; default: 1, 2 and all available threads).
+        #[arg(long, value_delimiter = ',', value_parser = parse_thread_count)]
+        thread_counts: Vec<usize>,
     },
+}
+
+/// Parses one `--thread-counts` entry (≥ 1).
+fn parse_thread_count(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!(
+            "--thread-counts {s}: expected whole numbers ≥ 1, e.g. 1,2,4,8,16"
+        )),
+    }
 }
 
 /// Parses `NXxNYxNZ` (each ≥ 1).
@@ -175,6 +189,7 @@ fn main() -> ExitCode {
             partitions,
             sweeps,
             packing,
+            thread_counts,
             ..
         } => scaling::scaling(&scaling::ScalingArgs {
             json: json.as_deref(),
@@ -184,6 +199,7 @@ fn main() -> ExitCode {
             partitions: &partitions,
             sweeps,
             packing: packing.as_deref(),
+            thread_counts: &thread_counts,
         }),
         Command::Bench {
             json,

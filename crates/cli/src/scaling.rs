@@ -79,6 +79,9 @@ pub struct ScalingArgs<'a> {
     pub sweeps: Option<usize>,
     /// Settled packing to load, or to write after settling if it does not exist yet.
     pub packing: Option<&'a Path>,
+    /// Thread counts to time (1 is always added: speedups are against it); empty: 1, 2 and
+    /// all available threads.
+    pub thread_counts: &'a [usize],
 }
 
 /// Runs the scaling study and prints the Table-1 and speedup rows. With `steps = 0` it only
@@ -87,7 +90,12 @@ pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
     let (json, grains, settle_steps, steps, partitions) =
         (a.json, a.grains, a.settle_steps, a.steps, a.partitions);
     let all = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let mut threads = vec![1, 2, all];
+    let mut threads = if a.thread_counts.is_empty() {
+        vec![1, 2, all]
+    } else {
+        // Speedups are against one thread, so one thread is always timed.
+        [&[1], a.thread_counts].concat()
+    };
     threads.sort_unstable();
     threads.dedup();
     // 1. Pour and settle once, cheaply (or load the packing settled before).

@@ -235,3 +235,68 @@ fn bad_track_input_is_one_clear_error() {
         assert_eq!(back, s, "{p}");
     }
 }
+
+/// `bench --scaling --thread-counts`: the listed counts are timed (with 1 added, the speedup's
+/// base) for every configuration; a count of 0 is one clear error.
+#[test]
+fn scaling_study_times_the_listed_thread_counts() {
+    let dir = tmp("scaling");
+    std::fs::create_dir_all(&dir).unwrap();
+    let json = dir.join("s.json");
+    let out = ballast()
+        .args([
+            "bench",
+            "--scaling",
+            "--grains",
+            "150",
+            "--settle-steps",
+            "5",
+        ])
+        .args(["--steps", "2", "--sweeps", "5", "--partitions", "2x1x1"])
+        .args(["--thread-counts", "3,2", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cases: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows: Vec<(String, u64, f64)> = cases
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            (
+                c["subdomains"].as_str().unwrap().to_string(),
+                c["threads"].as_u64().unwrap(),
+                c["speedup"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    let threads: Vec<(&str, u64)> = rows.iter().map(|(s, t, _)| (s.as_str(), *t)).collect();
+    assert_eq!(
+        threads,
+        [
+            ("1x1x1", 1),
+            ("1x1x1", 2),
+            ("1x1x1", 3),
+            ("2x1x1", 1),
+            ("2x1x1", 2),
+            ("2x1x1", 3)
+        ]
+    );
+    assert!(rows.iter().filter(|r| r.1 == 1).all(|r| r.2 == 1.0));
+    let out = ballast()
+        .args(["bench", "--scaling", "--thread-counts", "2,0"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--thread-counts") && err.contains("≥ 1"),
+        "{err}"
+    );
+}
