@@ -40,18 +40,6 @@ impl ContactSet {
         self.body1.is_empty()
     }
 
-    fn clear(&mut self) {
-        self.body1.clear();
-        self.body2.clear();
-        self.point.clear();
-        self.frame.clear();
-        self.gap.clear();
-        self.mu.clear();
-        self.impulse.clear();
-        self.status.clear();
-        self.local_point.clear();
-    }
-
     /// Impulse of contact `k` in world coordinates (acting on body 2).
     pub fn world_impulse(&self, k: usize) -> DVec3 {
         let [n, t, s] = self.frame[k];
@@ -91,7 +79,13 @@ impl ContactSet {
     /// Rebuilds `self` from the detected points `raw` (sorted by unordered pair), taking the
     /// impulses of `previous` where a contact persists: same bodies, and a position in body 1's
     /// frame within `match_fraction` × the smaller body radius of the old one. Each old contact
-    /// is reused at most once; the old world impulse is re-projected on the new frame.
+    /// is reused at most once, taken by the pair's points in order; the old world impulse is
+    /// re-projected on the new frame.
+    ///
+    /// Every point is built in parallel straight into the arrays (kept across steps: no
+    /// allocation, no serial copy). A point replays the matching of its pair's earlier points
+    /// to know which old contacts they took: a pair has at most a few points, so this costs
+    /// less than grouping the pairs would.
     pub fn rebuild(
         &mut self,
         raw: &[RawContact],
@@ -101,93 +95,118 @@ impl ContactSet {
         match_fraction: f64,
     ) {
         use rayon::prelude::*;
-        let key = |c: &RawContact| (c.body1.min(c.body2), c.body1.max(c.body2));
-        // Pairs are independent: match them in parallel, keep the order.
-        let groups: Vec<Vec<Built>> = raw
-            .par_chunk_by(|a, b| key(a) == key(b))
-            .map(|group| {
-                let k = key(&group[0]);
-                let p0 = partition(previous, |j| previous.key(j) < k);
-                let p1 = partition(previous, |j| previous.key(j) <= k);
-                let mut used = vec![false; p1 - p0];
-                group
-                    .iter()
-                    .map(|c| {
-                        build_one(c, bodies, friction, previous, p0, &mut used, match_fraction)
-                    })
-                    .collect()
-            })
-            .collect();
-        self.clear();
-        for c in groups.into_iter().flatten() {
-            self.body1.push(c.raw.body1);
-            self.body2.push(c.raw.body2);
-            self.point.push(c.raw.point);
-            self.frame.push(c.frame);
-            self.gap.push(c.raw.gap);
-            self.mu.push(c.mu);
-            self.impulse.push(c.impulse);
-            self.status.push(c.status);
-            self.local_point.push(c.local);
-        }
+        let n = raw.len();
+        self.body1.resize(n, 0);
+        self.body2.resize(n, 0);
+        self.point.resize(n, DVec3::ZERO);
+        self.frame.resize(n, [DVec3::ZERO; 3]);
+        self.gap.resize(n, 0.0);
+        self.mu.resize(n, 0.0);
+        self.impulse.resize(n, DVec3::ZERO);
+        self.status.resize(n, ContactStatus::NoContact);
+        self.local_point.resize(n, DVec3::ZERO);
+        (
+            &mut self.body1,
+            &mut self.body2,
+            &mut self.point,
+            &mut self.frame,
+            &mut self.gap,
+            &mut self.mu,
+            &mut self.impulse,
+            &mut self.status,
+            &mut self.local_point,
+        )
+            .into_par_iter()
+            .enumerate()
+            .with_min_len(256)
+            .for_each(
+                |(k, (b1, b2, point, frame, gap, mu, impulse, status, local))| {
+                    let c = &raw[k];
+                    let matched = match_in_pair(raw, k, bodies, previous, match_fraction);
+                    let (t, s) = frame_from_normal(c.normal);
+                    (*impulse, *status) = match matched {
+                        Some(j) => {
+                            let r = previous.world_impulse(j);
+                            (
+                                DVec3::new(r.dot(c.normal), r.dot(t), r.dot(s)),
+                                previous.status[j],
+                            )
+                        }
+                        None => (DVec3::ZERO, ContactStatus::NoContact),
+                    };
+                    (*b1, *b2, *point, *gap) = (c.body1, c.body2, c.point, c.gap);
+                    *frame = [c.normal, t, s];
+                    *mu = friction.get(
+                        bodies.group[c.body1 as usize],
+                        bodies.group[c.body2 as usize],
+                    );
+                    *local = local_point(bodies, c);
+                },
+            );
     }
 }
 
-/// A contact being built by [`ContactSet::rebuild`].
-struct Built {
-    raw: RawContact,
-    frame: [DVec3; 3],
-    mu: f64,
-    impulse: DVec3,
-    status: ContactStatus,
-    local: DVec3,
+/// Unordered pair key of a detected point.
+fn raw_key(c: &RawContact) -> (u32, u32) {
+    (c.body1.min(c.body2), c.body1.max(c.body2))
 }
 
-/// Frame, friction and warm start of one detected point; `used[j - p0]` marks the previous
-/// contacts of this pair already taken.
-fn build_one(
-    c: &RawContact,
+/// Position of a detected point in body 1's frame.
+fn local_point(bodies: &BodySet, c: &RawContact) -> DVec3 {
+    let b1 = c.body1 as usize;
+    bodies.orientation[b1].inverse() * (c.point - bodies.position[b1])
+}
+
+/// The old contact that detected point `k` takes over, if any: the pair's points, from the
+/// first to `k`, each take the nearest old contact of the same pair (same body 1) within the
+/// match distance that an earlier point has not taken.
+fn match_in_pair(
+    raw: &[RawContact],
+    k: usize,
     bodies: &BodySet,
-    friction: &FrictionTable,
     previous: &ContactSet,
-    p0: usize,
-    used: &mut [bool],
     match_fraction: f64,
-) -> Built {
-    let (b1, b2) = (c.body1 as usize, c.body2 as usize);
-    let local = bodies.orientation[b1].inverse() * (c.point - bodies.position[b1]);
-    let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
-    let mut best: Option<(f64, usize)> = None;
-    for (u, &was_used) in used.iter().enumerate() {
-        let j = p0 + u;
-        if was_used || previous.body1[j] != c.body1 {
-            continue;
-        }
-        let d = previous.local_point[j].distance(local);
-        if d <= tol && best.is_none_or(|(bd, _)| d < bd) {
-            best = Some((d, j));
-        }
+) -> Option<usize> {
+    let key = raw_key(&raw[k]);
+    let mut first = k;
+    while first > 0 && raw_key(&raw[first - 1]) == key {
+        first -= 1;
     }
-    let (t, s) = frame_from_normal(c.normal);
-    let (impulse, status) = match best {
-        Some((_, j)) => {
-            used[j - p0] = true;
-            let r = previous.world_impulse(j);
-            (
-                DVec3::new(r.dot(c.normal), r.dot(t), r.dot(s)),
-                previous.status[j],
-            )
-        }
-        None => (DVec3::ZERO, ContactStatus::NoContact),
+    let p0 = partition(previous, |j| previous.key(j) < key);
+    let p1 = partition(previous, |j| previous.key(j) <= key);
+    if p0 == p1 {
+        return None;
+    }
+    // Old contacts taken so far (a pair has at most a few: the manifolds are reduced).
+    let (mut small, mut large) = ([false; 16], Vec::new());
+    let used: &mut [bool] = if p1 - p0 <= small.len() {
+        &mut small[..p1 - p0]
+    } else {
+        large.resize(p1 - p0, false);
+        &mut large
     };
-    Built {
-        raw: *c,
-        frame: [c.normal, t, s],
-        mu: friction.get(bodies.group[b1], bodies.group[b2]),
-        impulse,
-        status,
-        local,
+    let (b1, b2) = (raw[k].body1 as usize, raw[k].body2 as usize);
+    let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
+    let mut taken = None;
+    for c in &raw[first..=k] {
+        let local = local_point(bodies, c);
+        let mut best: Option<(f64, usize)> = None;
+        for (u, &was_used) in used.iter().enumerate() {
+            let j = p0 + u;
+            if was_used || previous.body1[j] != c.body1 {
+                continue;
+            }
+            let d = previous.local_point[j].distance(local);
+            if d <= tol && best.is_none_or(|(bd, _)| d < bd) {
+                best = Some((d, j));
+            }
+        }
+        taken = best.map(|(_, j)| j);
+        if let Some(j) = taken {
+            used[j - p0] = true;
+        }
     }
+    taken
 }
 
 fn partition(set: &ContactSet, pred: impl Fn(usize) -> bool) -> usize {

@@ -43,8 +43,10 @@ pub struct Detector {
     aabbs: Vec<Aabb>,
     margins: Vec<f64>,
     pairs: Vec<(u32, u32)>,
-    /// Face hints of the previous step's polyhedron pairs, sorted by pair (temporal coherence;
-    /// they speed the narrow phase up and never change its results).
+    /// Scratch for merging the half-space pairs into the (sorted) broad-phase pairs.
+    merged: Vec<(u32, u32)>,
+    /// Face hints of the previous step's pairs (`FaceHint::NONE` where none), sorted by pair
+    /// (temporal coherence; they speed the narrow phase up and never change its results).
     hints: Vec<((u32, u32), FaceHint)>,
     /// This step's hint per pair, and the narrow phase's results (buffers kept across steps:
     /// megabytes allocated afresh every step cost page faults).
@@ -91,41 +93,45 @@ impl Detector {
         c.vertices.resize(nv, DVec3::ZERO);
         c.normals.resize(nf, DVec3::ZERO);
         c.offsets.resize(nf, 0.0);
-        // Per-body transforms, in parallel over disjoint chunks of the flat arrays.
-        let mut vchunks: Vec<&mut [DVec3]> = Vec::with_capacity(bodies.len());
-        let mut rest = c.vertices.as_mut_slice();
-        for i in 0..bodies.len() {
-            let (a, b) = rest.split_at_mut(c.vertex_start[i + 1] - c.vertex_start[i]);
-            vchunks.push(a);
-            rest = b;
+        // Per-body transforms, in parallel over runs of bodies (disjoint, contiguous pieces of
+        // the flat arrays; a few hundred pieces, so that cutting them costs nothing).
+        const RUN: usize = 64;
+        let n = bodies.len();
+        let runs = n.div_ceil(RUN);
+        let mut pieces = Vec::with_capacity(runs);
+        let (mut rv, mut rn, mut ro) = (
+            c.vertices.as_mut_slice(),
+            c.normals.as_mut_slice(),
+            c.offsets.as_mut_slice(),
+        );
+        for k in 0..runs {
+            let (first, end) = (k * RUN, ((k + 1) * RUN).min(n));
+            let nv = c.vertex_start[end] - c.vertex_start[first];
+            let nf = c.face_start[end] - c.face_start[first];
+            let (v, v_rest) = rv.split_at_mut(nv);
+            let (nr, n_rest) = rn.split_at_mut(nf);
+            let (o, o_rest) = ro.split_at_mut(nf);
+            pieces.push((first..end, v, nr, o));
+            (rv, rn, ro) = (v_rest, n_rest, o_rest);
         }
-        let mut nchunks: Vec<(&mut [DVec3], &mut [f64])> = Vec::with_capacity(bodies.len());
-        let (mut rn, mut ro) = (c.normals.as_mut_slice(), c.offsets.as_mut_slice());
-        for i in 0..bodies.len() {
-            let k = c.face_start[i + 1] - c.face_start[i];
-            let (a, b) = rn.split_at_mut(k);
-            let (x, y) = ro.split_at_mut(k);
-            nchunks.push((a, x));
-            rn = b;
-            ro = y;
-        }
-        vchunks
-            .into_par_iter()
-            .zip(nchunks.into_par_iter())
-            .enumerate()
-            .with_min_len(64)
-            .for_each(|(i, (v, (n, o)))| {
+        let (vertex_start, face_start) = (&c.vertex_start, &c.face_start);
+        pieces.into_par_iter().for_each(|(range, v, n, o)| {
+            let (v0, f0) = (vertex_start[range.start], face_start[range.start]);
+            for i in range {
                 if let Shape::Polyhedron(p) = &bodies.shape[i] {
                     let (x, q) = (bodies.position[i], bodies.orientation[i]);
+                    let v = &mut v[vertex_start[i] - v0..vertex_start[i + 1] - v0];
                     for (w, b) in v.iter_mut().zip(&p.vertices) {
                         *w = x + q * *b;
                     }
-                    for f in 0..p.face_normals.len() {
-                        n[f] = q * p.face_normals[f];
-                        o[f] = p.face_offsets[f] + n[f].dot(x);
+                    let f = face_start[i] - f0;
+                    for k in 0..p.face_normals.len() {
+                        n[f + k] = q * p.face_normals[k];
+                        o[f + k] = p.face_offsets[k] + n[f + k].dot(x);
                     }
                 }
-            });
+            }
+        });
     }
 
     /// Detects all contact points within the alert distance of touching, appended to `out`
@@ -141,15 +147,17 @@ impl Detector {
         out.clear();
         self.refresh_geometry(bodies);
         let n = bodies.len();
-        self.margins.clear();
-        self.margins
-            .extend((0..n).map(|i| match (&bodies.shape[i], bodies.kind[i]) {
+        (0..n)
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|i| match (&bodies.shape[i], bodies.kind[i]) {
                 (_, BodyKind::Fixed) | (Shape::Plane { .. }, _) => 0.0,
                 (Shape::Polyhedron(p), _) => {
                     dt * (bodies.velocity[i].length()
                         + bodies.angular_velocity[i].length() * p.radius)
                 }
-            }));
+            })
+            .collect_into_vec(&mut self.margins);
         let (cache, margins) = (&self.cache, &self.margins);
         (0..n)
             .into_par_iter()
@@ -185,6 +193,7 @@ impl Detector {
             &mut pairs,
         );
         // Half-spaces against every dynamic polyhedron whose box reaches within `alert`.
+        let from_broad = pairs.len();
         for &p in &planes {
             let (nrm, off) = plane_world(bodies, p as usize);
             for &i in &polys {
@@ -199,17 +208,24 @@ impl Detector {
                 }
             }
         }
-        pairs.sort_unstable();
-        // Last step's hint of each pair, by a merge of the two sorted lists.
-        let mut previous = self.hints.iter().peekable();
+        // The broad phase's pairs come sorted: sort the half-space pairs alone, then merge.
+        pairs[from_broad..].sort_unstable();
+        if from_broad > 0 && from_broad < pairs.len() && pairs[from_broad] < pairs[from_broad - 1] {
+            merge_sorted(&pairs[..from_broad], &pairs[from_broad..], &mut self.merged);
+            std::mem::swap(&mut pairs, &mut self.merged);
+        }
+        // Last step's hint of each pair (a binary search per pair: parallel, no serial merge).
+        let previous = &self.hints;
         let mut hints = std::mem::take(&mut self.pair_hints);
-        hints.clear();
-        hints.extend(pairs.iter().map(|pair| {
-            while previous.next_if(|(p, _)| p < pair).is_some() {}
-            previous
-                .next_if(|(p, _)| p == pair)
-                .map_or(FaceHint::NONE, |&(_, h)| h)
-        }));
+        pairs
+            .par_iter()
+            .with_min_len(1024)
+            .map(|pair| {
+                previous
+                    .binary_search_by_key(pair, |&(p, _)| p)
+                    .map_or(FaceHint::NONE, |k| previous[k].1)
+            })
+            .collect_into_vec(&mut hints);
         let mut results = std::mem::take(&mut self.results);
         let this = &*self;
         let margins = &self.margins;
@@ -247,32 +263,79 @@ impl Detector {
                 }
             })
             .collect_into_vec(&mut results);
-        self.hints.clear();
-        self.hints.extend(
-            pairs
-                .iter()
-                .zip(&results)
-                .filter(|(_, r)| r.3 != FaceHint::NONE)
-                .map(|(&p, r)| (p, r.3)),
-        );
-        for (b1, b2, m, _) in &results {
-            let (b1, b2) = (*b1, *b2);
-            if let Some(m) = m {
-                for p in &m.points {
-                    out.push(RawContact {
-                        body1: b1,
-                        body2: b2,
-                        point: p.point,
-                        normal: m.normal,
-                        gap: p.gap,
-                    });
-                }
-            }
-        }
+        pairs
+            .par_iter()
+            .zip(results.par_iter())
+            .with_min_len(1024)
+            .map(|(&p, r)| (p, r.3))
+            .collect_into_vec(&mut self.hints);
+        write_points(&results, out);
         self.pairs = pairs;
         self.pair_hints = hints;
         self.results = results;
     }
+}
+
+/// Merges two sorted lists into `out` (cleared first).
+fn merge_sorted<T: Copy + Ord>(a: &[T], b: &[T], out: &mut Vec<T>) {
+    out.clear();
+    let (mut i, mut j) = (0, 0);
+    while i < a.len() && j < b.len() {
+        if b[j] < a[i] {
+            out.push(b[j]);
+            j += 1;
+        } else {
+            out.push(a[i]);
+            i += 1;
+        }
+    }
+    out.extend_from_slice(&a[i..]);
+    out.extend_from_slice(&b[j..]);
+}
+
+/// The manifolds' points, in pair order, written into `out` in parallel: each chunk of
+/// results knows where its points start from the counts of the chunks before it.
+fn write_points(results: &[NarrowResult], out: &mut Vec<RawContact>) {
+    const CHUNK: usize = 1024;
+    let count = |r: &NarrowResult| r.2.as_ref().map_or(0, |m| m.points.len());
+    let counts: Vec<usize> = results
+        .par_chunks(CHUNK)
+        .map(|c| c.iter().map(count).sum())
+        .collect();
+    let blank = RawContact {
+        body1: 0,
+        body2: 0,
+        point: DVec3::ZERO,
+        normal: DVec3::ZERO,
+        gap: 0.0,
+    };
+    out.resize(counts.iter().sum(), blank);
+    let mut slices = Vec::with_capacity(counts.len());
+    let mut rest = out.as_mut_slice();
+    for &c in &counts {
+        let (a, b) = rest.split_at_mut(c);
+        slices.push(a);
+        rest = b;
+    }
+    slices
+        .into_par_iter()
+        .zip(results.par_chunks(CHUNK))
+        .for_each(|(dst, chunk)| {
+            let points = chunk.iter().filter_map(|(b1, b2, m, _)| {
+                m.as_ref().map(|m| {
+                    m.points.iter().map(move |p| RawContact {
+                        body1: *b1,
+                        body2: *b2,
+                        point: p.point,
+                        normal: m.normal,
+                        gap: p.gap,
+                    })
+                })
+            });
+            for (d, p) in dst.iter_mut().zip(points.flatten()) {
+                *d = p;
+            }
+        });
 }
 
 /// World normal and offset (`n·x = offset` on the boundary) of half-space body `i`.
@@ -282,4 +345,27 @@ fn plane_world(bodies: &BodySet, i: usize) -> (DVec3, f64) {
     };
     let n = bodies.orientation[i] * *normal;
     (n, n.dot(bodies.position[i]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::merge_sorted;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Merging two sorted lists gives the sorted concatenation.
+        #[test]
+        fn merge_is_the_sorted_concatenation(
+            mut a in proptest::collection::vec((0u32..50, 0u32..50), 0..40),
+            mut b in proptest::collection::vec((0u32..50, 0u32..50), 0..40),
+        ) {
+            a.sort_unstable();
+            b.sort_unstable();
+            let mut out = vec![(7, 7)];
+            merge_sorted(&a, &b, &mut out);
+            let mut expected = [a, b].concat();
+            expected.sort_unstable();
+            prop_assert_eq!(out, expected);
+        }
+    }
 }
