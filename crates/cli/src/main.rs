@@ -94,6 +94,11 @@ enum Command {
         /// always timed: speedups are against it; default: 1, 2 and all available threads).
         #[arg(long, value_delimiter = ',', value_parser = parse_thread_count)]
         thread_counts: Vec<usize>,
+        /// Scaling study: DDM phases with fewer contacts run on the calling thread (the
+        /// scenario key `ddm.min_parallel_contacts`: the value for 2 threads, scaled by
+        /// 2/threads; scheduling only, results are unchanged).
+        #[arg(long, default_value_t = ballast_engine::solver::ddm::MIN_PARALLEL_CONTACTS)]
+        min_parallel_contacts: usize,
     },
 }
 
@@ -190,6 +195,7 @@ fn main() -> ExitCode {
             sweeps,
             packing,
             thread_counts,
+            min_parallel_contacts,
             ..
         } => scaling::scaling(&scaling::ScalingArgs {
             json: json.as_deref(),
@@ -200,6 +206,7 @@ fn main() -> ExitCode {
             sweeps,
             packing: packing.as_deref(),
             thread_counts: &thread_counts,
+            min_parallel_contacts,
         }),
         Command::Bench {
             json,

@@ -82,6 +82,8 @@ pub struct ScalingArgs<'a> {
     /// Thread counts to time (1 is always added: speedups are against it); empty: 1, 2 and
     /// all available threads.
     pub thread_counts: &'a [usize],
+    /// [`DdmSettings::min_parallel_contacts`] of the DDM cases.
+    pub min_parallel_contacts: usize,
 }
 
 /// Runs the scaling study and prints the Table-1 and speedup rows. With `steps = 0` it only
@@ -142,6 +144,7 @@ pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
     configs.extend(partitions.iter().map(|&d| {
         Some(DdmSettings {
             subdomains: d,
+            min_parallel_contacts: a.min_parallel_contacts,
             ..Default::default()
         })
     }));

@@ -253,7 +253,13 @@ fn scaling_study_times_the_listed_thread_counts() {
             "5",
         ])
         .args(["--steps", "2", "--sweeps", "5", "--partitions", "2x1x1"])
-        .args(["--thread-counts", "3,2", "--json"])
+        .args([
+            "--thread-counts",
+            "3,2",
+            "--min-parallel-contacts",
+            "0",
+            "--json",
+        ])
         .arg(&json)
         .output()
         .unwrap();

@@ -252,3 +252,37 @@ fn converged_ddm_agrees_with_monolithic() {
         );
     }
 }
+
+/// Interface colouring: the groups of one colour join disjoint subdomains (they run
+/// concurrently), and the groups come in `(colour, pair)` order.
+#[test]
+fn interface_groups_of_one_colour_are_disjoint() {
+    let mut w = poured(1500);
+    w.prepare();
+    let locals = w.local_problems().to_vec();
+    let partition = w.partition(&settings([4, 4, 1], true, Balance::Contacts));
+    let p = DdmProblem::build(&partition, &locals, true);
+    assert!(
+        p.groups.len() > 10 && p.colours > 2,
+        "{} groups",
+        p.groups.len()
+    );
+    let meets = |a: (u32, u32), b: (u32, u32)| a.0 == b.0 || a.0 == b.1 || a.1 == b.0 || a.1 == b.1;
+    for (i, g) in p.groups.iter().enumerate() {
+        for h in &p.groups[i + 1..] {
+            if h.colour == g.colour {
+                assert!(
+                    !meets(g.pair, h.pair),
+                    "{:?} and {:?} share colour",
+                    g.pair,
+                    h.pair
+                );
+            }
+        }
+    }
+    let keys: Vec<_> = p.groups.iter().map(|g| (g.colour, g.pair)).collect();
+    assert!(
+        keys.windows(2).all(|k| k[0] < k[1]),
+        "groups in (colour, pair) order"
+    );
+}

@@ -27,7 +27,7 @@
 //! interface_sweeps = 1 # m
 //! balance = "contacts" # or "volume" (the paper's uniform boxes)
 //! parallel_interface = true
-//! min_parallel_contacts = 4096  # smaller phases run on one thread (same results)
+//! min_parallel_contacts = 4096  # smaller phases run on one thread (× 2/threads; same results)
 //!
 //! [materials]
 //! stone = 2700         # density, kg/m³
