@@ -172,8 +172,11 @@ fn match_in_pair(
     while first > 0 && raw_key(&raw[first - 1]) == key {
         first -= 1;
     }
+    // The pair's old contacts: a binary search for the first, a short scan for the rest.
     let p0 = partition(previous, |j| previous.key(j) < key);
-    let p1 = partition(previous, |j| previous.key(j) <= key);
+    let p1 = (p0..previous.len())
+        .find(|&j| previous.key(j) != key)
+        .unwrap_or(previous.len());
     if p0 == p1 {
         return None;
     }
