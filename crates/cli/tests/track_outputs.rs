@@ -124,9 +124,11 @@ struct Runs {
 }
 
 /// A scratch folder. Left in place: the runs in it are shared by every test of this file (a
-/// static fixture, never dropped).
+/// static fixture, never dropped), so it lives under cargo's `target/tmp` (cleaned with the
+/// build) rather than the system's temporary folder.
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ballast-track-{}-{name}", std::process::id()));
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("ballast-track-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     d
 }

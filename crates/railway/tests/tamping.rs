@@ -40,8 +40,11 @@ fn mini() -> TrackScenario {
     s
 }
 
+/// The prepared beds' cache of this file's runs, shared by its tests (never removed, so under
+/// cargo's `target/tmp` rather than the system's temporary folder).
 fn cache_dir() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("ballast-tamping-test-{}", std::process::id()));
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("ballast-tamping-test-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
 }
