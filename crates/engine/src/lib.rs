@@ -26,6 +26,7 @@ pub mod math;
 pub mod output;
 pub mod scenario;
 pub mod shapes;
+mod slices;
 pub mod solver;
 pub mod timing;
 pub mod world;

@@ -10,6 +10,7 @@ pub use narrow::{FaceHint, Manifold, ManifoldPoint, WorldPolyhedron};
 use crate::bodies::{BodyKind, BodySet};
 use crate::math::DVec3;
 use crate::shapes::Shape;
+use crate::slices::split_lengths;
 use rayon::prelude::*;
 
 /// One detected contact point, before the contact frame and the law are attached.
@@ -97,41 +98,37 @@ impl Detector {
         // the flat arrays; a few hundred pieces, so that cutting them costs nothing).
         const RUN: usize = 64;
         let n = bodies.len();
-        let runs = n.div_ceil(RUN);
-        let mut pieces = Vec::with_capacity(runs);
-        let (mut rv, mut rn, mut ro) = (
-            c.vertices.as_mut_slice(),
-            c.normals.as_mut_slice(),
-            c.offsets.as_mut_slice(),
-        );
-        for k in 0..runs {
-            let (first, end) = (k * RUN, ((k + 1) * RUN).min(n));
-            let nv = c.vertex_start[end] - c.vertex_start[first];
-            let nf = c.face_start[end] - c.face_start[first];
-            let (v, v_rest) = rv.split_at_mut(nv);
-            let (nr, n_rest) = rn.split_at_mut(nf);
-            let (o, o_rest) = ro.split_at_mut(nf);
-            pieces.push((first..end, v, nr, o));
-            (rv, rn, ro) = (v_rest, n_rest, o_rest);
-        }
+        let run = |k: usize| k * RUN..((k + 1) * RUN).min(n);
         let (vertex_start, face_start) = (&c.vertex_start, &c.face_start);
-        pieces.into_par_iter().for_each(|(range, v, n, o)| {
-            let (v0, f0) = (vertex_start[range.start], face_start[range.start]);
-            for i in range {
-                if let Shape::Polyhedron(p) = &bodies.shape[i] {
-                    let (x, q) = (bodies.position[i], bodies.orientation[i]);
-                    let v = &mut v[vertex_start[i] - v0..vertex_start[i + 1] - v0];
-                    for (w, b) in v.iter_mut().zip(&p.vertices) {
-                        *w = x + q * *b;
-                    }
-                    let f = face_start[i] - f0;
-                    for k in 0..p.face_normals.len() {
-                        n[f + k] = q * p.face_normals[k];
-                        o[f + k] = p.face_offsets[k] + n[f + k].dot(x);
+        // Lengths of the runs' pieces of an array indexed by `start` (per-body offsets).
+        fn cut(start: &[usize], n: usize) -> impl Iterator<Item = usize> + '_ {
+            (0..n.div_ceil(RUN)).map(move |k| start[((k + 1) * RUN).min(n)] - start[k * RUN])
+        }
+        let (v_pieces, _) = split_lengths(&mut c.vertices, cut(vertex_start, n));
+        let (n_pieces, _) = split_lengths(&mut c.normals, cut(face_start, n));
+        let (o_pieces, _) = split_lengths(&mut c.offsets, cut(face_start, n));
+        let pieces: Vec<_> = v_pieces.into_iter().zip(n_pieces).zip(o_pieces).collect();
+        pieces
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(k, ((v, n), o))| {
+                let range = run(k);
+                let (v0, f0) = (vertex_start[range.start], face_start[range.start]);
+                for i in range {
+                    if let Shape::Polyhedron(p) = &bodies.shape[i] {
+                        let (x, q) = (bodies.position[i], bodies.orientation[i]);
+                        let v = &mut v[vertex_start[i] - v0..vertex_start[i + 1] - v0];
+                        for (w, b) in v.iter_mut().zip(&p.vertices) {
+                            *w = x + q * *b;
+                        }
+                        let f = face_start[i] - f0;
+                        for j in 0..p.face_normals.len() {
+                            n[f + j] = q * p.face_normals[j];
+                            o[f + j] = p.face_offsets[j] + n[f + j].dot(x);
+                        }
                     }
                 }
-            }
-        });
+            });
     }
 
     /// Detects all contact points within the alert distance of touching, appended to `out`
@@ -310,13 +307,7 @@ fn write_points(results: &[NarrowResult], out: &mut Vec<RawContact>) {
         gap: 0.0,
     };
     out.resize(counts.iter().sum(), blank);
-    let mut slices = Vec::with_capacity(counts.len());
-    let mut rest = out.as_mut_slice();
-    for &c in &counts {
-        let (a, b) = rest.split_at_mut(c);
-        slices.push(a);
-        rest = b;
-    }
+    let (slices, _) = split_lengths(out, counts.iter().copied());
     slices
         .into_par_iter()
         .zip(results.par_chunks(CHUNK))

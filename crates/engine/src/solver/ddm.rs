@@ -336,15 +336,8 @@ fn split<'a>(
     pb: &'a mut [SolverBody],
     starts: &[usize],
 ) -> (Vec<&'a mut [SolverBody]>, &'a [SolverBody]) {
-    let k = starts.len() - 1;
-    let mut out = Vec::with_capacity(k);
-    let mut rest = pb;
-    for e in 0..k {
-        let (a, b) = rest.split_at_mut(starts[e + 1] - starts[e]);
-        out.push(a);
-        rest = b;
-    }
-    (out, rest)
+    let (pieces, rest) = crate::slices::split_lengths(pb, starts.windows(2).map(|w| w[1] - w[0]));
+    (pieces, rest)
 }
 
 /// Runs `f` on every subdomain with its view, in parallel when worth it; results in subdomain
@@ -561,13 +554,8 @@ pub fn solve_and_correct(
     terms.clear();
     terms.resize(locals.len(), 0.0);
     {
-        let mut chunks = Vec::with_capacity(buckets.len());
-        let mut rest = terms.as_mut_slice();
-        for b in &buckets {
-            let (c, r) = rest.split_at_mut(b.len());
-            chunks.push(c);
-            rest = r;
-        }
+        let (chunks, _) =
+            crate::slices::split_lengths(terms.as_mut_slice(), buckets.iter().map(|b| b.len()));
         let pb = pb.as_slice();
         buckets
             .par_iter()
