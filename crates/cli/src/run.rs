@@ -114,10 +114,10 @@ fn job(a: &RunArgs) -> Result<Job, String> {
                     last = std::time::Instant::now();
                     eprintln!(
                         "  {}: t = {:.3} s (at least {:.3} s), {} grains, {} contacts",
-                        if p.stage == 1 {
-                            "deposition"
-                        } else {
-                            "settling around the blocks"
+                        match p.stage {
+                            1 => "deposition",
+                            2 => "settling around the blocks",
+                            _ => "healing the overlaps",
                         },
                         p.time,
                         p.target,

@@ -390,7 +390,12 @@ fn resumed_track_run_is_bit_identical_to_a_straight_one() {
         grains
             + prep["removed_in_blocks"].as_u64().unwrap()
             + prep["removed_above"].as_u64().unwrap()
+            + prep["removed_wedged"].as_u64().unwrap()
     );
+    // The preparation healed its overlaps (this bed stops settling with a grain wedged 6 mm
+    // deep).
+    let healed = prep["max_penetration"].as_f64().unwrap();
+    assert!(healed < r.scenario.preparation.heal_overlap, "{prep}");
     eprintln!(
         "{grains} grains, {} bodies, digest {digest}; stops at steps {}, {}, {}",
         sc["bodies"], r.a, r.c, r.b

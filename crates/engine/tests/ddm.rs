@@ -286,3 +286,41 @@ fn interface_groups_of_one_colour_are_disjoint() {
         "groups in (colour, pair) order"
     );
 }
+
+/// The colouring is greedy, largest group first: every group took the smallest colour left
+/// free by the groups coloured before it (larger ones, or as large with a smaller pair), so
+/// each colour below its own is held by an earlier group it meets.
+#[test]
+fn interface_colouring_is_greedy_largest_first() {
+    let mut w = poured(1500);
+    w.prepare();
+    let locals = w.local_problems().to_vec();
+    for split in [[4, 4, 1], [3, 3, 1], [8, 2, 1]] {
+        let partition = w.partition(&settings(split, true, Balance::Contacts));
+        let p = DdmProblem::build(&partition, &locals, true);
+        let meets =
+            |a: (u32, u32), b: (u32, u32)| a.0 == b.0 || a.0 == b.1 || a.1 == b.0 || a.1 == b.1;
+        let before = |g: &ddm::InterfaceGroup, h: &ddm::InterfaceGroup| {
+            (std::cmp::Reverse(h.bucket.len()), h.pair)
+                < (std::cmp::Reverse(g.bucket.len()), g.pair)
+        };
+        let sizes: Vec<usize> = p.groups.iter().map(|g| g.bucket.len()).collect();
+        assert!(
+            sizes.iter().any(|&n| n != sizes[0]),
+            "{split:?}: groups of different sizes"
+        );
+        for g in &p.groups {
+            for c in 0..g.colour {
+                assert!(
+                    p.groups
+                        .iter()
+                        .any(|h| h.colour == c && meets(g.pair, h.pair) && before(g, h)),
+                    "{split:?}: group {:?} ({} contacts, colour {}) could have taken colour {c}",
+                    g.pair,
+                    g.bucket.len(),
+                    g.colour
+                );
+            }
+        }
+    }
+}

@@ -20,6 +20,10 @@
 //! [correction]        # overlap post-stabilisation (position only); fraction = 0 turns it off
 //! fraction = 0.2
 //! slop = 1e-5          # m
+//! sweeps = 10
+//! max_push = inf       # m per step and contact
+//! guard = false        # also hold the open contacts
+//! rotation = true      # false: translate the bodies only
 //!
 //! [ddm]               # domain decomposition (Algorithm 1); absent = monolithic NLGS
 //! subdomains = [1, 7, 1]

@@ -5,12 +5,16 @@
 //! by up to `h (1 − θ) v`), so overlaps accumulate over repeated impacts. After the velocity
 //! solve, this step finds *pseudo-velocities* `Ṽ = M⁻¹ Hₙ p` with frictionless normal impulses
 //! `p ≥ 0` such that `0 ≤ p_α ⊥ ũₙ,α − b_α ≥ 0`, with the target separation speed
-//! `b_α = β max(0, −g_α − slop) / h`, by projected Gauss-Seidel sweeps in contact order. The
-//! positions move by `h Ṽ`; the velocities are untouched, so no kinetic energy is injected.
+//! `b_α = min(β max(0, −g_α − slop), push) / h`, by projected Gauss-Seidel sweeps in contact
+//! order. The positions move by `h Ṽ`; the velocities are untouched, so no kinetic energy is
+//! injected. With `guard`, the open contacts (`g_α ≥ −slop`) join the problem with
+//! `b_α = −max(g_α, 0) / h`: pushing one overlap apart may close their gap, not overlap them.
+//! Without `rotation`, the pseudo-impulses move the bodies' centres only (`Ṽ = M⁻¹ Hₙ p` with
+//! the inertia terms left out, and `W_α,nn = m₁⁻¹ + m₂⁻¹`).
 //! β = 0 switches it off (plain Moreau-Jean, as LMGC90).
 
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
-use crate::math::DVec3;
+use crate::math::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
 /// Settings of the overlap correction.
@@ -23,6 +27,18 @@ pub struct CorrectionSettings {
     pub slop: f64,
     /// Gauss-Seidel sweeps of the pseudo-velocity problem.
     pub sweeps: usize,
+    /// Largest correction of one contact in one step (m): a deeper overlap is healed over
+    /// several steps, each moving the grains by less than the alert distance, so that the
+    /// neighbours they approach are detected (and, with `guard`, held).
+    pub max_push: f64,
+    /// Hold the detected open contacts too (see the module documentation). Off by default:
+    /// the default correction moves grains by far less than the alert distance, and sweeping
+    /// every contact would cost as much again as sweeping the overlaps.
+    pub guard: bool,
+    /// Let the correction rotate the bodies (the default), or only translate them: a normal
+    /// impulse at a corner of an elongated grain also turns it, and where that corner is
+    /// deep in a neighbour the turn can drive another corner into the next one.
+    pub rotation: bool,
 }
 
 impl Default for CorrectionSettings {
@@ -31,6 +47,9 @@ impl Default for CorrectionSettings {
             fraction: 0.2,
             slop: 1e-5,
             sweeps: 10,
+            max_push: f64::INFINITY,
+            guard: false,
+            rotation: true,
         }
     }
 }
@@ -47,6 +66,12 @@ impl CorrectionSettings {
         if !(self.slop.is_finite() && self.slop >= 0.0) {
             return Err(format!("correction.slop = {} must be ≥ 0 m", self.slop));
         }
+        if self.max_push.is_nan() || self.max_push <= 0.0 {
+            return Err(format!(
+                "correction.max_push = {} must be > 0 m (inf: no limit)",
+                self.max_push
+            ));
+        }
         Ok(())
     }
 }
@@ -62,17 +87,20 @@ pub struct Overlap {
     pub p: f64,
 }
 
-/// A body's solver copy with zero velocities (its inverse masses kept).
-pub fn at_rest(b: &SolverBody) -> SolverBody {
+/// A body's solver copy with zero velocities (its inverse masses kept; its inverse inertia
+/// too when the correction may rotate it, otherwise zero).
+pub fn at_rest(b: &SolverBody, rotation: bool) -> SolverBody {
     SolverBody {
         v: DVec3::ZERO,
         w: DVec3::ZERO,
+        inv_inertia: if rotation { b.inv_inertia } else { DMat3::ZERO },
         ..*b
     }
 }
 
-/// Lists in `out` the contacts of `locals` overlapping beyond the slop, in order, with
-/// `p = 0`; returns how many. None when the correction is off.
+/// Lists in `out` the contacts of `locals` overlapping beyond the slop (with `guard`, every
+/// contact), in order, with `p = 0`; returns how many overlap. None when the correction is
+/// off.
 pub fn overlaps(
     settings: &CorrectionSettings,
     h: f64,
@@ -83,31 +111,43 @@ pub fn overlaps(
     if settings.fraction == 0.0 {
         return 0;
     }
-    out.extend(
-        locals
-            .iter()
-            .enumerate()
-            .filter(|(_, c)| c.gap < -settings.slop)
-            .map(|(k, c)| Overlap {
-                k: k as u32,
-                target: settings.fraction * (-c.gap - settings.slop) / h,
-                p: 0.0,
-            }),
-    );
-    out.len()
+    let mut overlapping = 0;
+    out.extend(locals.iter().enumerate().filter_map(|(k, c)| {
+        let target = if c.gap < -settings.slop {
+            overlapping += 1;
+            (settings.fraction * (-c.gap - settings.slop)).min(settings.max_push) / h
+        } else if settings.guard {
+            -c.gap.max(0.0) / h
+        } else {
+            return None;
+        };
+        Some(Overlap {
+            k: k as u32,
+            target,
+            p: 0.0,
+        })
+    }));
+    overlapping
 }
 
 /// One projected Gauss-Seidel sweep over `rows` (in order):
-/// `p_α ← max(0, p_α + (b_α − ũₙ,α) / W_α,nn)`, the pseudo-velocities updated at once.
+/// `p_α ← max(0, p_α + (b_α − ũₙ,α) / W_α,nn)`, the pseudo-velocities updated at once
+/// (`W_α,nn` without its inertia terms when the pseudo bodies have none, see [`at_rest`]).
 pub fn sweep<B: BodyAccess + ?Sized>(
     locals: &[LocalProblem],
     rows: &mut [Overlap],
     pseudo: &mut B,
+    rotation: bool,
 ) {
     for row in rows {
         let c = &locals[row.k as usize];
         let un = c.velocity(pseudo).x;
-        let new = (row.p + (row.target - un) / c.w.x_axis.x).max(0.0);
+        let wnn = if rotation {
+            c.w.x_axis.x
+        } else {
+            pseudo.body(c.body1).inv_mass + pseudo.body(c.body2).inv_mass
+        };
+        let new = (row.p + (row.target - un) / wnn).max(0.0);
         let dp = new - row.p;
         if dp != 0.0 {
             c.apply(pseudo, DVec3::new(dp, 0.0, 0.0));
@@ -127,13 +167,144 @@ pub fn pseudo_velocities(
     pseudo: &mut Vec<SolverBody>,
 ) -> bool {
     pseudo.clear();
-    pseudo.extend(bodies.iter().map(at_rest));
+    pseudo.extend(bodies.iter().map(|b| at_rest(b, settings.rotation)));
     let mut rows = Vec::new();
     if overlaps(settings, h, locals, &mut rows) == 0 {
         return false;
     }
     for _ in 0..settings.sweeps {
-        sweep(locals, &mut rows, pseudo.as_mut_slice());
+        sweep(locals, &mut rows, pseudo.as_mut_slice(), settings.rotation);
     }
     true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::DMat3;
+    use crate::solver::delassus::delassus_block;
+
+    /// A fixed body 0 and two unit-mass cubes 1, 2 in a row along x; contact (0, 1) overlaps
+    /// by 5 mm, (1, 2) is open by 0.1 mm. Points on the line of the centres: no rotation.
+    fn row() -> (Vec<LocalProblem>, Vec<SolverBody>) {
+        let body = |inv_mass: f64| SolverBody {
+            v: DVec3::ZERO,
+            w: DVec3::ZERO,
+            inv_mass,
+            inv_inertia: DMat3::IDENTITY * 6.0 * inv_mass,
+        };
+        let bodies = vec![body(0.0), body(1.0), body(1.0)];
+        let frame = [DVec3::X, DVec3::Y, DVec3::Z];
+        let contact = |a: u32, b: u32, gap: f64| {
+            let (r1, r2) = (DVec3::X * 0.5, -DVec3::X * 0.5);
+            let w = delassus_block(&frame, r1, r2, &bodies[a as usize], &bodies[b as usize]);
+            LocalProblem {
+                body1: a,
+                body2: b,
+                dynamic1: a != 0,
+                dynamic2: true,
+                frame,
+                r1,
+                r2,
+                w,
+                w_inv: w.inverse(),
+                gap,
+                mu: 0.0,
+                r: DVec3::ZERO,
+            }
+        };
+        let locals = vec![contact(0, 1, -5e-3), contact(1, 2, 1e-4)];
+        (locals, bodies)
+    }
+
+    /// Gaps after the positions move by `h Ṽ`.
+    fn gaps_after(settings: &CorrectionSettings) -> [f64; 2] {
+        let (locals, bodies) = row();
+        let h = 1e-3;
+        let mut pseudo = Vec::new();
+        assert!(pseudo_velocities(
+            settings,
+            h,
+            &locals,
+            &bodies,
+            &mut pseudo
+        ));
+        [0, 1].map(|k| locals[k].gap + h * locals[k].velocity(pseudo.as_slice()).x)
+    }
+
+    #[test]
+    fn guard_keeps_open_contacts_open() {
+        let plain = CorrectionSettings {
+            fraction: 1.0,
+            slop: 0.0,
+            sweeps: 50,
+            ..Default::default()
+        };
+        // Alone, the overlap is pushed straight into the open neighbour.
+        let [g01, g12] = gaps_after(&plain);
+        assert!(g01.abs() < 1e-12, "{g01}");
+        assert!((g12 + 4.9e-3).abs() < 1e-12, "{g12}");
+        // Guarded, the neighbour is pushed along and only touches.
+        let [g01, g12] = gaps_after(&CorrectionSettings {
+            guard: true,
+            ..plain.clone()
+        });
+        assert!(g01.abs() < 1e-9, "{g01}");
+        assert!(g12.abs() < 1e-9, "{g12}");
+        // At most `max_push` per step.
+        let [g01, g12] = gaps_after(&CorrectionSettings {
+            guard: true,
+            max_push: 1e-3,
+            ..plain
+        });
+        assert!((g01 + 4e-3).abs() < 1e-9, "{g01}");
+        assert!(g12.abs() < 1e-9, "{g12}");
+    }
+
+    #[test]
+    fn without_rotation_the_correction_translates() {
+        let (mut locals, bodies) = row();
+        // Move the overlapping contact's point off the line of the centres: its impulse has
+        // a lever arm.
+        let c = &mut locals[0];
+        c.r1 += DVec3::Y * 0.4;
+        c.r2 += DVec3::Y * 0.4;
+        c.w = delassus_block(&c.frame, c.r1, c.r2, &bodies[0], &bodies[1]);
+        let h = 1e-3;
+        for rotation in [true, false] {
+            let s = CorrectionSettings {
+                fraction: 1.0,
+                slop: 0.0,
+                sweeps: 50,
+                rotation,
+                ..Default::default()
+            };
+            let mut pseudo = Vec::new();
+            assert!(pseudo_velocities(&s, h, &locals[..1], &bodies, &mut pseudo));
+            let healed = locals[0].gap + h * locals[0].velocity(pseudo.as_slice()).x;
+            assert!(healed.abs() < 1e-12, "{rotation}: {healed}");
+            let spin = pseudo[1].w.length();
+            if rotation {
+                assert!(spin > 1.0, "{spin}");
+            } else {
+                assert_eq!(spin, 0.0);
+                // All of the 5 mm by translation, along the normal.
+                assert!((pseudo[1].v - DVec3::X * 5.0).length() < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn max_push_must_be_positive() {
+        for bad in [0.0, -1e-3, f64::NAN] {
+            let s = CorrectionSettings {
+                max_push: bad,
+                ..Default::default()
+            };
+            let e = s.validate().unwrap_err();
+            assert!(e.contains("correction.max_push"), "{e}");
+        }
+        let s = CorrectionSettings::default();
+        assert!(s.validate().is_ok());
+    }
 }

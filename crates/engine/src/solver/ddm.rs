@@ -14,8 +14,8 @@
 //! 4. optionally ([`solve_and_correct`]), the overlap correction's sweeps on the same split.
 //!
 //! Beyond the paper, Γ is solved in parallel too: its contacts are grouped by the pair of
-//! subdomains they join, the subdomain-adjacency edges are coloured greedily (in a fixed order)
-//! so that the groups of one colour touch disjoint subdomains, and each colour's groups run
+//! subdomains they join, the subdomain-adjacency edges are coloured greedily (largest group
+//! first, ties by pair) so that the groups of one colour touch disjoint subdomains, and each colour's groups run
 //! concurrently. Everything depends on the partition only: the same partition gives
 //! bit-identical results for any number of threads. With `n = m = 1` the iterate is exactly
 //! monolithic NLGS run in [`DdmProblem::equivalent_order`].
@@ -241,9 +241,19 @@ impl DdmProblem {
             let group = self.groups.last_mut().expect("pushed above");
             group.bucket.push(renumber(&locals[idx as usize]), idx);
         }
+        // Greedy colouring, largest groups first (ties by pair): a colour lasts as long as its
+        // largest group, so the large groups share the first colours instead of each
+        // stretching a colour of its own (paper scale, 16x2x1 on 16 threads: the interface
+        // took 40 % less time than in pair order).
+        let mut order: Vec<usize> = (0..self.groups.len()).collect();
+        order.sort_unstable_by_key(|&i| {
+            let g = &self.groups[i];
+            (std::cmp::Reverse(g.bucket.len()), g.pair)
+        });
         let mut used: Vec<Vec<usize>> = vec![Vec::new(); k];
         let mut colours = 0;
-        for g in self.groups.iter_mut() {
+        for i in order {
+            let g = &mut self.groups[i];
             if g.pair.0 == STATIC {
                 g.colour = 0;
                 colours = 1;
@@ -674,8 +684,11 @@ fn correct(
 ) -> bool {
     let starts = &partition.starts;
     pv.clear();
-    pv.par_extend(pb.par_iter().map(correction::at_rest));
     let (settings, h) = (c.settings, c.h);
+    pv.par_extend(
+        pb.par_iter()
+            .map(|b| correction::at_rest(b, settings.rotation)),
+    );
     let found = for_subdomains(p, pv, starts, min_parallel, |b, _| {
         correction::overlaps(settings, h, &b.locals, &mut b.overlaps)
     })
@@ -687,10 +700,10 @@ fn correct(
     if found {
         for _ in 0..settings.sweeps {
             for_subdomains(p, pv, starts, min_parallel, |b, v| {
-                correction::sweep(&b.locals, &mut b.overlaps, v)
+                correction::sweep(&b.locals, &mut b.overlaps, v, settings.rotation)
             });
             for_interface(p, pv, starts, min_parallel, |b, v| {
-                correction::sweep(&b.locals, &mut b.overlaps, v)
+                correction::sweep(&b.locals, &mut b.overlaps, v, settings.rotation)
             });
         }
     }
