@@ -233,7 +233,8 @@ fn converged_ddm_agrees_with_monolithic() {
         let on_static = |ls: &[LocalProblem]| -> DVec3 {
             ls.iter()
                 .map(|c| {
-                    let p = c.frame[0] * c.r.x + c.frame[1] * c.r.y + c.frame[2] * c.r.z;
+                    let [n, t, s] = c.frame3();
+                    let p = n * c.r.x + t * c.r.y + s * c.r.z;
                     let mut f = DVec3::ZERO;
                     if !c.dynamic1 {
                         f -= p;

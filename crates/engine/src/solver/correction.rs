@@ -143,7 +143,7 @@ pub fn sweep<B: BodyAccess + ?Sized>(
         let c = &locals[row.k as usize];
         let un = c.velocity(pseudo).x;
         let wnn = if rotation {
-            c.w.x_axis.x
+            c.w.xx()
         } else {
             pseudo.body(c.body1).inv_mass + pseudo.body(c.body2).inv_mass
         };
@@ -181,7 +181,7 @@ pub fn pseudo_velocities(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::math::DMat3;
+    use crate::math::{DMat3, Sym3};
     use crate::solver::delassus::delassus_block;
 
     /// A fixed body 0 and two unit-mass cubes 1, 2 in a row along x; contact (0, 1) overlaps
@@ -197,17 +197,22 @@ mod tests {
         let frame = [DVec3::X, DVec3::Y, DVec3::Z];
         let contact = |a: u32, b: u32, gap: f64| {
             let (r1, r2) = (DVec3::X * 0.5, -DVec3::X * 0.5);
-            let w = delassus_block(&frame, r1, r2, &bodies[a as usize], &bodies[b as usize]);
+            let w = Sym3::from_mat(delassus_block(
+                &frame,
+                r1,
+                r2,
+                &bodies[a as usize],
+                &bodies[b as usize],
+            ));
             LocalProblem {
                 body1: a,
                 body2: b,
                 dynamic1: a != 0,
                 dynamic2: true,
-                frame,
+                frame: [frame[0], frame[1]],
                 r1,
                 r2,
                 w,
-                w_inv: w.inverse(),
                 gap,
                 mu: 0.0,
                 r: DVec3::ZERO,
@@ -269,7 +274,13 @@ mod tests {
         let c = &mut locals[0];
         c.r1 += DVec3::Y * 0.4;
         c.r2 += DVec3::Y * 0.4;
-        c.w = delassus_block(&c.frame, c.r1, c.r2, &bodies[0], &bodies[1]);
+        c.w = Sym3::from_mat(delassus_block(
+            &c.frame3(),
+            c.r1,
+            c.r2,
+            &bodies[0],
+            &bodies[1],
+        ));
         let h = 1e-3;
         for rotation in [true, false] {
             let s = CorrectionSettings {

@@ -1,13 +1,13 @@
 //! Local problems: for each contact, its frame and lever arms (which define the rows `H_αᵀ`)
-//! and the diagonal Delassus block `W_αα = H_αᵀ M⁻¹ H_α` with its inverse.
+//! and the diagonal Delassus block `W_αα = H_αᵀ M⁻¹ H_α`.
 //!
-//! Only what cannot be recomputed cheaply is stored (≈ 250 bytes per contact): the sweep is
-//! memory-bound, so `r × e_k` and `I⁻¹ (r × P)` are recomputed from the lever arms and the
+//! Only what cannot be recomputed cheaply is stored (200 bytes per contact: `W` as a symmetric
+//! matrix, its inverse computed when needed; the frame as `[n, t]`): the sweep is memory-bound at large scale, so `r × e_k` and `I⁻¹ (r × P)` are recomputed from the lever arms and the
 //! body's inverse inertia, which stays in cache across that body's contacts.
 
 use crate::bodies::BodySet;
 use crate::contacts::ContactSet;
-use crate::math::{skew, DMat3, DVec3};
+use crate::math::{skew, DMat3, DVec3, Sym3};
 
 /// What the solver knows of a body: current velocities and inverse mass properties (zero for
 /// kinematic and fixed bodies, whose velocities therefore never change).
@@ -29,14 +29,14 @@ pub struct LocalProblem {
     /// Whether each body is dynamic (non-dynamic bodies are never written).
     pub dynamic1: bool,
     pub dynamic2: bool,
-    /// Local frame `e = [n, t, s]`.
-    pub frame: [DVec3; 3],
+    /// Local frame `e = [n, t, s]`, stored as `[n, t]`: `s = n × t` (see [`Self::frame3`]).
+    pub frame: [DVec3; 2],
     /// Lever arms from each body's centre of mass to the contact point.
     pub r1: DVec3,
     pub r2: DVec3,
-    /// Diagonal Delassus block (local frame) and its inverse.
-    pub w: DMat3,
-    pub w_inv: DMat3,
+    /// Diagonal Delassus block (local frame), symmetric; its inverse is computed where needed
+    /// (a contact that does not stay open), which costs less than streaming it from memory.
+    pub w: Sym3,
     /// Gap at the beginning of the step.
     pub gap: f64,
     pub mu: f64,
@@ -67,23 +67,28 @@ impl BodyAccess for [SolverBody] {
 }
 
 impl LocalProblem {
+    /// The local frame `[n, t, s = n × t]`.
+    #[inline(always)]
+    pub fn frame3(&self) -> [DVec3; 3] {
+        let [n, t] = self.frame;
+        [n, t, n.cross(t)]
+    }
+
     /// Local relative velocity `u = H_αᵀ V = Eᵀ[(v₂ + ω₂ × r₂) − (v₁ + ω₁ × r₁)]`.
     #[inline(always)]
     pub fn velocity<B: BodyAccess + ?Sized>(&self, b: &B) -> DVec3 {
         let (b1, b2) = (b.body(self.body1), b.body(self.body2));
         let d = (b2.v + b2.w.cross(self.r2)) - (b1.v + b1.w.cross(self.r1));
-        DVec3::new(
-            self.frame[0].dot(d),
-            self.frame[1].dot(d),
-            self.frame[2].dot(d),
-        )
+        let [n, t, s] = self.frame3();
+        DVec3::new(n.dot(d), t.dot(d), s.dot(d))
     }
 
     /// Applies the impulse increment `dr` (local frame): `V += M⁻¹ H_α dr`, i.e. `+P` on body 2
     /// and `−P` on body 1 with `P = E dr`. Non-dynamic bodies are left alone.
     #[inline(always)]
     pub fn apply<B: BodyAccess + ?Sized>(&self, b: &mut B, dr: DVec3) {
-        let p = self.frame[0] * dr.x + self.frame[1] * dr.y + self.frame[2] * dr.z;
+        let [n, t, s] = self.frame3();
+        let p = n * dr.x + t * dr.y + s * dr.z;
         if self.dynamic1 {
             let b1 = b.body_mut(self.body1);
             b1.v -= p * b1.inv_mass;
@@ -127,24 +132,43 @@ pub fn build_local_problems(
         .with_min_len(256)
         .map(|k| {
             let (b1, b2) = (contacts.body1[k] as usize, contacts.body2[k] as usize);
-            let e = contacts.frame[k];
+            // The frame as the sweep rebuilds it from `[n, t]`.
+            let [n, t, _] = contacts.frame[k];
+            let e = [n, t, n.cross(t)];
             let x = contacts.point[k];
             let (r1, r2) = (x - bodies.position[b1], x - bodies.position[b2]);
-            let w = delassus_block(&e, r1, r2, &solver_bodies[b1], &solver_bodies[b2]);
+            let w = Sym3::from_mat(delassus_block(
+                &e,
+                r1,
+                r2,
+                &solver_bodies[b1],
+                &solver_bodies[b2],
+            ));
             LocalProblem {
                 body1: b1 as u32,
                 body2: b2 as u32,
                 dynamic1: solver_bodies[b1].inv_mass > 0.0,
                 dynamic2: solver_bodies[b2].inv_mass > 0.0,
-                frame: e,
+                frame: [n, t],
                 r1,
                 r2,
                 w,
-                w_inv: w.inverse(),
                 gap: contacts.gap[k],
                 mu: contacts.mu[k],
                 r: contacts.impulse[k],
             }
         })
         .collect_into_vec(out);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sweep streams the local problems from memory at large scale: their size is a
+    /// budget (320 bytes with `W` and `W⁻¹` as full matrices and the frame's three vectors).
+    #[test]
+    fn local_problem_size() {
+        assert_eq!(std::mem::size_of::<LocalProblem>(), 200);
+    }
 }
