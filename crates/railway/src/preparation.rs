@@ -262,10 +262,10 @@ const FORMAT: u32 = 3;
 /// contact), with the open contacts held (`guard`: pushing one overlap apart must not make
 /// another), the grains translated only (turned by impulses at their corners, they drove
 /// other corners into their neighbours: on the default bed the overlaps beyond 0.5 mm went
-/// from 38 to 81 over the first 10 steps with rotation, down to 9 without) and enough sweeps
-/// for the wedged grains' neighbours to make room. The run's
-/// default (20 %, 10 sweeps, overlaps only) is gentle enough not to be seen in the
-/// indicators, and heals a grain wedged a few millimetres deep only over a hundred steps.
+/// from 38 to 81 over the first 10 steps with rotation, down to 7 without) and enough sweeps
+/// for the wedged grains' neighbours to make room. The run's default (20 %, 10 sweeps,
+/// overlaps only) is gentle enough not to be seen in the indicators, and heals a grain
+/// wedged a few millimetres deep only over a hundred steps.
 pub fn heal_correction(alert: f64) -> CorrectionSettings {
     CorrectionSettings {
         fraction: 0.5,
