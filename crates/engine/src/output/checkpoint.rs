@@ -471,11 +471,9 @@ impl Scene {
                 "number of bodies is {nc} in the checkpoint, {nw} in the scenario"
             ));
         }
-        if self.settings_json != other.settings_json {
-            return Some(settings_difference(
-                &self.settings_json,
-                &other.settings_json,
-            ));
+        let settings = current_settings_json(&self.settings_json);
+        if settings != other.settings_json {
+            return Some(settings_difference(&settings, &other.settings_json));
         }
         let differing: Vec<usize> = (0..nc)
             .filter(|&i| self.bodies[i] != other.bodies[i])
@@ -538,6 +536,17 @@ impl Scene {
         }
         None
     }
+}
+
+/// A checkpoint's settings as this version writes them: a setting added since the checkpoint
+/// was written reads as its default, so a run resumes when its scenario keeps that default
+/// (session 8 added three overlap correction settings, and every older checkpoint then failed
+/// to resume). Settings this version cannot read are left as they were written.
+fn current_settings_json(json: &str) -> String {
+    serde_json::from_str::<crate::world::StepSettings>(json)
+        .ok()
+        .and_then(|s| serde_json::to_string(&s).ok())
+        .unwrap_or_else(|| json.to_string())
 }
 
 /// Names the first setting that differs, by its path (`solver.tolerance`), with both values.
@@ -1083,4 +1092,42 @@ pub fn prune_checkpoints(dir: &Path, keep: usize) -> std::io::Result<Vec<PathBuf
         removed.push(path);
     }
     Ok(removed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bodies::BodySet;
+    use crate::laws::FrictionTable;
+    use crate::world::StepSettings;
+
+    /// A checkpoint written before a setting existed resumes under its default, and only then.
+    #[test]
+    fn settings_added_later_read_as_their_defaults() {
+        let world = World::new(
+            BodySet::default(),
+            FrictionTable::new(0.5),
+            StepSettings::default(),
+        );
+        let now = Scene::of(&world);
+        let mut old = Scene::of(&world);
+        for added in [
+            ",\"max_push\":null",
+            ",\"guard\":false",
+            ",\"rotation\":true",
+        ] {
+            assert!(old.settings_json.contains(added), "{}", old.settings_json);
+            old.settings_json = old.settings_json.replace(added, "");
+        }
+        assert_eq!(old.difference(&now), None);
+        // And a checkpoint written now (an unlimited `max_push` is `null` in JSON) too.
+        assert_eq!(now.difference(&Scene::of(&world)), None);
+        assert!(serde_json::from_str::<StepSettings>(&now.settings_json).is_ok());
+        assert_eq!(current_settings_json(&now.settings_json), now.settings_json);
+        // The scenario turning the new setting on is a difference, named.
+        let mut world = world;
+        world.settings.correction.guard = true;
+        let e = old.difference(&Scene::of(&world)).unwrap();
+        assert!(e.contains("correction.guard"), "{e}");
+    }
 }

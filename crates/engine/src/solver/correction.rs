@@ -30,6 +30,7 @@ pub struct CorrectionSettings {
     /// Largest correction of one contact in one step (m): a deeper overlap is healed over
     /// several steps, each moving the grains by less than the alert distance, so that the
     /// neighbours they approach are detected (and, with `guard`, held).
+    #[serde(deserialize_with = "infinite_if_null")]
     pub max_push: f64,
     /// Hold the detected open contacts too (see the module documentation). Off by default:
     /// the default correction moves grains by far less than the alert distance, and sweeping
@@ -52,6 +53,11 @@ impl Default for CorrectionSettings {
             rotation: true,
         }
     }
+}
+
+/// JSON writes an infinite `max_push` (no limit) as `null`: read it back as infinite.
+fn infinite_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
 }
 
 impl CorrectionSettings {
