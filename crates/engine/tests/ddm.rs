@@ -254,6 +254,11 @@ fn converged_ddm_agrees_with_monolithic() {
     }
 }
 
+/// Whether two subdomain pairs share a subdomain.
+fn meets(a: (u32, u32), b: (u32, u32)) -> bool {
+    a.0 == b.0 || a.0 == b.1 || a.1 == b.0 || a.1 == b.1
+}
+
 /// Interface colouring: the groups of one colour join disjoint subdomains (they run
 /// concurrently), and the groups come in `(colour, pair)` order.
 #[test]
@@ -268,7 +273,6 @@ fn interface_groups_of_one_colour_are_disjoint() {
         "{} groups",
         p.groups.len()
     );
-    let meets = |a: (u32, u32), b: (u32, u32)| a.0 == b.0 || a.0 == b.1 || a.1 == b.0 || a.1 == b.1;
     for (i, g) in p.groups.iter().enumerate() {
         for h in &p.groups[i + 1..] {
             if h.colour == g.colour {
@@ -299,8 +303,6 @@ fn interface_colouring_is_greedy_largest_first() {
     for split in [[4, 4, 1], [3, 3, 1], [8, 2, 1]] {
         let partition = w.partition(&settings(split, true, Balance::Contacts));
         let p = DdmProblem::build(&partition, &locals, true);
-        let meets =
-            |a: (u32, u32), b: (u32, u32)| a.0 == b.0 || a.0 == b.1 || a.1 == b.0 || a.1 == b.1;
         let before = |g: &ddm::InterfaceGroup, h: &ddm::InterfaceGroup| {
             (std::cmp::Reverse(h.bucket.len()), h.pair)
                 < (std::cmp::Reverse(g.bucket.len()), g.pair)

@@ -438,7 +438,7 @@ fn prepare_from(
     let density = ballast.grains.density;
     let mut steps = 0;
     let mut simulated = 0.0;
-    let mut run = |world: &mut World, stage: u8, min_time: f64| -> (f64, f64) {
+    let mut run = |world: &mut World, stage: u8, min_time: f64| {
         let n = world.bodies.len();
         let mut speed = f64::INFINITY;
         while world.time < min_time
@@ -458,7 +458,6 @@ fn prepare_from(
             }
         }
         simulated += world.time;
-        speeds(world)
     };
 
     // Deposition into the empty box.
