@@ -99,6 +99,10 @@ enum Command {
         /// 2/threads; scheduling only, results are unchanged).
         #[arg(long, default_value_t = ballast_engine::solver::ddm::MIN_PARALLEL_CONTACTS)]
         min_parallel_contacts: usize,
+        /// Scaling study: detection reuse distance in m (the scenario key
+        /// `simulation.reuse_distance`; 0 = every pair detected anew each step).
+        #[arg(long, default_value_t = ballast_engine::world::default_reuse_distance(), value_parser = parse_reuse_distance)]
+        reuse_distance: f64,
     },
 }
 
@@ -108,6 +112,17 @@ fn parse_thread_count(s: &str) -> Result<usize, String> {
         Ok(n) if n >= 1 => Ok(n),
         _ => Err(format!(
             "--thread-counts {s}: expected whole numbers ≥ 1, e.g. 1,2,4,8,16"
+        )),
+    }
+}
+
+/// Parses `--reuse-distance` (finite, ≥ 0, at most a quarter of the 1 mm alert distance).
+fn parse_reuse_distance(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if (0.0..=2.5e-4).contains(&x) => Ok(x),
+        _ => Err(format!(
+            "--reuse-distance {s}: expected a distance in m between 0 and 2.5e-4 (a quarter of \
+             the 1 mm alert distance), e.g. 1e-5"
         )),
     }
 }
@@ -196,6 +211,7 @@ fn main() -> ExitCode {
             packing,
             thread_counts,
             min_parallel_contacts,
+            reuse_distance,
             ..
         } => scaling::scaling(&scaling::ScalingArgs {
             json: json.as_deref(),
@@ -207,6 +223,7 @@ fn main() -> ExitCode {
             packing: packing.as_deref(),
             thread_counts: &thread_counts,
             min_parallel_contacts,
+            reuse_distance,
         }),
         Command::Bench {
             json,

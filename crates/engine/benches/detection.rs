@@ -37,7 +37,7 @@ fn detection(c: &mut Criterion) {
     let (alert, dt) = (world.settings.alert, world.settings.dt);
     let mut detector = Detector::default();
     let mut raw: Vec<RawContact> = Vec::new();
-    detector.detect(&world.bodies, alert, dt, &mut raw);
+    detector.detect(&world.bodies, alert, dt, 0.0, &mut raw);
     eprintln!(
         "{} bodies, {} contact points",
         world.bodies.len(),
@@ -48,7 +48,7 @@ fn detection(c: &mut Criterion) {
         .build()
         .expect("thread pool");
     c.bench_function("detect_settled_1_thread", |b| {
-        b.iter(|| pool.install(|| detector.detect(&world.bodies, alert, dt, &mut raw)))
+        b.iter(|| pool.install(|| detector.detect(&world.bodies, alert, dt, 0.0, &mut raw)))
     });
 }
 

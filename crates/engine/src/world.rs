@@ -40,6 +40,11 @@ pub struct StepSettings {
     /// A contact persists (warm start) if it moved less than this fraction of the smaller body
     /// radius in body 1's frame.
     pub match_fraction: f64,
+    /// Reuse distance (m): detection reuses a pair's contact manifold while no point of either
+    /// body moved by more than this since the manifold was computed (0 = every pair detected
+    /// anew each step). See [`crate::detection::coherence`].
+    #[serde(default = "default_reuse_distance")]
+    pub reuse_distance: f64,
     /// NLGS settings.
     pub solver: SolverSettings,
     /// Overlap post-stabilisation.
@@ -56,11 +61,18 @@ impl Default for StepSettings {
             gravity: DVec3::new(0.0, 0.0, -9.81),
             alert: 1e-3,
             match_fraction: 0.1,
+            reuse_distance: default_reuse_distance(),
             solver: SolverSettings::default(),
             correction: CorrectionSettings::default(),
             ddm: None,
         }
     }
+}
+
+/// Default [`StepSettings::reuse_distance`]: 10 µm, a hundredth of the engine's default alert
+/// distance (a settled grain is re-examined once its points have moved that far).
+pub fn default_reuse_distance() -> f64 {
+    1e-5
 }
 
 /// What one step did.
@@ -89,7 +101,7 @@ pub struct World {
     pub step_index: u64,
     /// Cumulated phase times.
     pub timers: PhaseTimes,
-    detector: Detector,
+    pub(crate) detector: Detector,
     raw: Vec<RawContact>,
     previous: ContactSet,
     locals: Vec<LocalProblem>,
@@ -162,6 +174,12 @@ impl World {
         }
     }
 
+    /// Candidate pairs whose contact manifold the last detection reused from the step before
+    /// (temporal coherence, see [`StepSettings::reuse_distance`]), and candidate pairs in all.
+    pub fn detection_reuse(&self) -> (usize, usize) {
+        self.detector.reuse_counts()
+    }
+
     /// The local problems of the step being prepared (after [`World::prepare`]).
     pub fn local_problems(&self) -> &[LocalProblem] {
         &self.locals
@@ -187,7 +205,7 @@ impl World {
         // 1. Detection at qᵢ and warm start.
         std::mem::swap(&mut self.previous, &mut self.contacts);
         self.detector
-            .detect(&self.bodies, s.alert, s.dt, &mut self.raw);
+            .detect(&self.bodies, s.alert, s.dt, s.reuse_distance, &mut self.raw);
         self.contacts.rebuild(
             &self.raw,
             &self.bodies,

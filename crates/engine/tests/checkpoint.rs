@@ -122,6 +122,9 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() {
         // The warm start must be exercised: persisting contacts with impulses.
         let loaded = first.contacts.impulse.iter().filter(|r| r.x > 0.0).count();
         assert!(loaded > 5, "only {loaded} loaded contacts at the split");
+        // So must the detection's reuse of manifolds (anchor poses saved, cache rebuilt).
+        let (reused, pairs) = first.detection_reuse();
+        assert!(reused > 0, "no manifold reused at the split ({pairs} pairs)");
         write_checkpoint_with_stats(&first, Some(&stats), &path).unwrap();
     }
 
@@ -634,11 +637,12 @@ fn checkpoints_cover_all_state_fields() {
             "time",
             "step_index",
             "timers",
+            // its anchor poses (the rest of it is rebuilt every step)
+            "detector",
             // from the scenario
             "friction",
             "settings",
             // rebuilt every step (`previous` is swapped with `contacts` first thing)
-            "detector",
             "raw",
             "previous",
             "locals",

@@ -4,6 +4,8 @@
 //! [simulation]          # all optional
 //! dt = 8e-4             # s (the paper preset: 2e-4)
 //! steps = 2205          # default: the whole cycle, tamping.duration / dt
+//! alert = 4e-4          # m
+//! reuse_distance = 1e-5 # m, contact geometry reused until a grain moved this far (0 = never)
 //! output_interval = 25  # steps between rows of series.csv
 //! vtk_interval = 125    # steps between ParaView frames (0 = none)
 //! checkpoint_interval = 500
@@ -53,6 +55,9 @@ pub struct TrackSimulation {
     /// Alert distance (m): pairs closer than this (plus each body's speculative margin, the
     /// distance it can move in a step) become contacts.
     pub alert: f64,
+    /// Reuse distance (m): a pair's contact geometry is reused until a point of either body
+    /// moved this far since it was computed; 0 = every pair detected anew each step.
+    pub reuse_distance: f64,
     /// Steps to run; `None` = the whole cycle.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub steps: Option<u64>,
@@ -67,6 +72,7 @@ impl Default for TrackSimulation {
             dt: 8e-4,
             theta: 0.5,
             alert: DEFAULT_ALERT,
+            reuse_distance: ballast_engine::world::default_reuse_distance(),
             steps: None,
             // Every 20 ms and 0.1 s of the default cycle.
             output_interval: 25,
@@ -375,6 +381,14 @@ impl TrackScenario {
         check_range("simulation.dt", s.dt, 1e-7, 1e-2, "s").map_err(|e| e.to_string())?;
         check_range("simulation.theta", s.theta, 0.5, 1.0, "").map_err(|e| e.to_string())?;
         check_range("simulation.alert", s.alert, 0.0, 0.1, "m").map_err(|e| e.to_string())?;
+        check_range(
+            "simulation.reuse_distance",
+            s.reuse_distance,
+            0.0,
+            0.25 * s.alert,
+            "m",
+        )
+        .map_err(|e| e.to_string())?;
         if s.output_interval == 0 {
             return Err(refuse("simulation.output_interval", 0, "≥ 1 step").to_string());
         }
@@ -422,6 +436,7 @@ impl TrackScenario {
             dt: self.simulation.dt,
             theta: self.simulation.theta,
             alert: self.simulation.alert,
+            reuse_distance: self.simulation.reuse_distance,
             solver: self.solver.clone(),
             correction: self.correction.clone(),
             ddm: self.ddm.clone(),

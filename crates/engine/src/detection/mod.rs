@@ -1,14 +1,18 @@
 //! Contact detection at the beginning of a step: world geometry of every body, broad phase on a
-//! uniform grid, narrow phase per candidate pair (in parallel, in a deterministic order).
+//! uniform grid, narrow phase per candidate pair (in parallel, in a deterministic order), with
+//! the manifolds of pairs whose bodies have barely moved reused from the previous step (see
+//! [`coherence`]).
 
 pub mod broad;
+pub mod coherence;
 pub mod narrow;
 
 pub use broad::{Aabb, BroadPhase};
+pub use coherence::Anchors;
 pub use narrow::{FaceHint, Manifold, ManifoldPoint, WorldPolyhedron};
 
 use crate::bodies::{BodyKind, BodySet};
-use crate::math::DVec3;
+use crate::math::{DQuat, DVec3};
 use crate::shapes::Shape;
 use crate::slices::split_lengths;
 use rayon::prelude::*;
@@ -43,30 +47,82 @@ pub struct Detector {
     cache: GeometryCache,
     aabbs: Vec<Aabb>,
     margins: Vec<f64>,
+    /// Anchor poses: the world geometry is computed there (temporal coherence).
+    anchors: Anchors,
+    /// The world geometry of bodies that were not re-anchored is not at their anchors (anchors
+    /// restored from a checkpoint): the next detection recomputes it for every body.
+    geometry_stale: bool,
+    /// Bit patterns of the `(alert, reuse)` the cached manifolds were computed with: other
+    /// values invalidate them.
+    cached_for: Option<(u64, u64)>,
+    /// This step's candidate pairs, sorted, and their outcomes: at the next step, the cache.
     pairs: Vec<(u32, u32)>,
-    /// Scratch for merging the half-space pairs into the (sorted) broad-phase pairs.
+    results: Vec<PairGeometry>,
+    /// Scratch for the next step's pairs and outcomes (buffers kept across steps: megabytes
+    /// allocated afresh every step cost page faults), and for merging the half-space pairs.
+    spare_pairs: Vec<(u32, u32)>,
+    spare_results: Vec<PairGeometry>,
     merged: Vec<(u32, u32)>,
-    /// Face hints of the previous step's pairs (`FaceHint::NONE` where none), sorted by pair
-    /// (temporal coherence; they speed the narrow phase up and never change its results).
-    hints: Vec<((u32, u32), FaceHint)>,
-    /// This step's hint per pair, and the narrow phase's results (buffers kept across steps:
-    /// megabytes allocated afresh every step cost page faults).
-    pair_hints: Vec<FaceHint>,
-    results: Vec<NarrowResult>,
 }
 
-/// A pair's narrow-phase outcome: bodies (body 1 first), manifold, and the hint for next step.
-type NarrowResult = (u32, u32, Option<Manifold>, FaceHint);
+/// A pair's narrow-phase outcome at the anchor poses: bodies (body 1 first), manifold (`len`
+/// points, none when apart), the face hint for the pair's next test, whether it was reused,
+/// and whether it may be: only a manifold computed with both bodies' margins at the slow-body
+/// value is a function of the anchors alone.
+#[derive(Clone, Copy, Debug)]
+struct PairGeometry {
+    body1: u32,
+    body2: u32,
+    normal: DVec3,
+    points: [ManifoldPoint; 4],
+    len: u8,
+    hint: FaceHint,
+    reused: bool,
+    reusable: bool,
+}
+
+impl PairGeometry {
+    fn new(body1: u32, body2: u32, manifold: Option<Manifold>, hint: FaceHint) -> Self {
+        let blank = ManifoldPoint {
+            point: DVec3::ZERO,
+            gap: 0.0,
+        };
+        let mut g = PairGeometry {
+            body1,
+            body2,
+            normal: DVec3::ZERO,
+            points: [blank; 4],
+            len: 0,
+            hint,
+            reused: false,
+            reusable: false,
+        };
+        if let Some(m) = manifold {
+            g.normal = m.normal;
+            // The narrow phase reduces every manifold to at most four points.
+            for (slot, p) in g.points.iter_mut().zip(&m.points) {
+                *slot = *p;
+                g.len += 1;
+            }
+        }
+        g
+    }
+
+    fn points(&self) -> &[ManifoldPoint] {
+        &self.points[..self.len as usize]
+    }
+}
 
 impl Detector {
-    /// World view of polyhedron `i` (valid after [`Detector::detect`] refreshed the cache).
+    /// World view of polyhedron `i` at its anchor pose (valid after [`Detector::detect`]
+    /// refreshed the cache).
     fn world_poly<'a>(&'a self, bodies: &'a BodySet, i: usize) -> Option<WorldPolyhedron<'a>> {
         match &bodies.shape[i] {
             Shape::Polyhedron(p) => {
                 let c = &self.cache;
                 Some(WorldPolyhedron {
                     shape: p,
-                    center: bodies.position[i],
+                    center: self.anchors.position[i],
                     vertices: &c.vertices[c.vertex_start[i]..c.vertex_start[i + 1]],
                     face_normals: &c.normals[c.face_start[i]..c.face_start[i + 1]],
                     face_offsets: &c.offsets[c.face_start[i]..c.face_start[i + 1]],
@@ -76,10 +132,38 @@ impl Detector {
         }
     }
 
-    fn refresh_geometry(&mut self, bodies: &BodySet) {
+    /// The anchor poses (see [`coherence`]), stored in checkpoints.
+    pub fn anchors(&self) -> &Anchors {
+        &self.anchors
+    }
+
+    /// Restores anchor poses saved with [`Detector::anchors`] (a resumed run): the first
+    /// detection then computes at these anchors what the interrupted run had cached.
+    pub fn set_anchors(&mut self, position: Vec<DVec3>, orientation: Vec<DQuat>) {
+        self.anchors = Anchors {
+            position,
+            orientation,
+            ..Anchors::default()
+        };
+        self.pairs.clear();
+        self.results.clear();
+        self.geometry_stale = true;
+    }
+
+    /// Pairs whose manifold the last detection reused, and candidate pairs in all.
+    pub fn reuse_counts(&self) -> (usize, usize) {
+        let reused = self.results.par_iter().filter(|r| r.reused).count();
+        (reused, self.results.len())
+    }
+
+    /// Recomputes the per-body offsets into the flat geometry arrays; true if they changed since
+    /// the last detection (bodies or shapes replaced: every anchor is then stale).
+    fn refresh_layout(&mut self, bodies: &BodySet) -> bool {
         let c = &mut self.cache;
-        c.vertex_start.clear();
-        c.face_start.clear();
+        let (old_v, old_f) = (
+            std::mem::take(&mut c.vertex_start),
+            std::mem::take(&mut c.face_start),
+        );
         let (mut nv, mut nf) = (0, 0);
         for s in &bodies.shape {
             c.vertex_start.push(nv);
@@ -94,6 +178,16 @@ impl Detector {
         c.vertices.resize(nv, DVec3::ZERO);
         c.normals.resize(nf, DVec3::ZERO);
         c.offsets.resize(nf, 0.0);
+        // A first detection has no layout to compare with (anchors restored from a checkpoint
+        // are then kept).
+        !old_v.is_empty() && (old_v != c.vertex_start || old_f != c.face_start)
+    }
+
+    /// World vertices and face planes of the re-anchored bodies (of every body with `all`), at
+    /// their anchor pose.
+    fn refresh_geometry(&mut self, bodies: &BodySet, all: bool) {
+        let c = &mut self.cache;
+        let anchors = &self.anchors;
         // Per-body transforms, in parallel over runs of bodies (disjoint, contiguous pieces of
         // the flat arrays; a few hundred pieces, so that cutting them costs nothing).
         const RUN: usize = 64;
@@ -115,8 +209,11 @@ impl Detector {
                 let range = run(k);
                 let (v0, f0) = (vertex_start[range.start], face_start[range.start]);
                 for i in range {
+                    if !(all || anchors.moved[i]) {
+                        continue;
+                    }
                     if let Shape::Polyhedron(p) = &bodies.shape[i] {
-                        let (x, q) = (bodies.position[i], bodies.orientation[i]);
+                        let (x, q) = (anchors.position[i], anchors.orientation[i]);
                         let v = &mut v[vertex_start[i] - v0..vertex_start[i + 1] - v0];
                         for (w, b) in v.iter_mut().zip(&p.vertices) {
                             *w = x + q * *b;
@@ -140,9 +237,22 @@ impl Detector {
     /// `alert + m₁ + m₂`. So no approaching pair is missed however fast it moves (a grain
     /// spinning at 100 rad/s sweeps several alert distances per step); the extra contacts have
     /// positive gaps and carry no impulse unless they would close within the step.
-    pub fn detect(&mut self, bodies: &BodySet, alert: f64, dt: f64, out: &mut Vec<RawContact>) {
+    ///
+    /// Reuse distance `reuse` (m; 0 = every pair computed anew at the current poses, the exact
+    /// method): the narrow phase runs at the bodies' anchor poses and a pair's manifold is
+    /// reused while neither body is re-anchored (see [`coherence`]). Each body's margin is then
+    /// `reuse + max(m, reuse)`: the distance its points may have moved since the anchor, plus
+    /// a speed margin that is the same for every slow body (so a cached manifold depends on the
+    /// anchors alone).
+    pub fn detect(
+        &mut self,
+        bodies: &BodySet,
+        alert: f64,
+        dt: f64,
+        reuse: f64,
+        out: &mut Vec<RawContact>,
+    ) {
         out.clear();
-        self.refresh_geometry(bodies);
         let n = bodies.len();
         (0..n)
             .into_par_iter()
@@ -155,6 +265,20 @@ impl Detector {
                 }
             })
             .collect_into_vec(&mut self.margins);
+        let layout_changed = self.refresh_layout(bodies);
+        // The cached manifolds were computed with the alert distance and margins of these
+        // settings; the anchors themselves stay valid whatever they are.
+        let key = (alert.to_bits(), reuse.to_bits());
+        if self.cached_for != Some(key) || layout_changed {
+            self.pairs.clear();
+            self.results.clear();
+            self.cached_for = Some(key);
+        }
+        self.anchors
+            .update(bodies, &self.margins, reuse, layout_changed);
+        let all = std::mem::take(&mut self.geometry_stale);
+        self.refresh_geometry(bodies, all);
+        let reach = |m: f64| if reuse > 0.0 { reuse + m.max(reuse) } else { m };
         let (cache, margins) = (&self.cache, &self.margins);
         (0..n)
             .into_par_iter()
@@ -166,7 +290,7 @@ impl Detector {
                         (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
                         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
                     );
-                    let half = DVec3::splat(0.5 * alert + margins[i]);
+                    let half = DVec3::splat(0.5 * alert + reach(margins[i]));
                     Aabb {
                         min: lo - half,
                         max: hi + half,
@@ -182,7 +306,7 @@ impl Detector {
         let polys: Vec<u32> = (0..n as u32).filter(|&i| !is_plane(i as usize)).collect();
         let planes: Vec<u32> = (0..n as u32).filter(|&i| is_plane(i as usize)).collect();
         let dynamic = |i: u32| bodies.kind[i as usize] == BodyKind::Dynamic;
-        let mut pairs = std::mem::take(&mut self.pairs);
+        let mut pairs = std::mem::take(&mut self.spare_pairs);
         self.broad.find_pairs(
             &self.aabbs,
             &polys,
@@ -192,7 +316,7 @@ impl Detector {
         // Half-spaces against every dynamic polyhedron whose box reaches within `alert`.
         let from_broad = pairs.len();
         for &p in &planes {
-            let (nrm, off) = plane_world(bodies, p as usize);
+            let (nrm, off) = plane_world(&self.anchors, bodies, p as usize);
             for &i in &polys {
                 if !dynamic(i) {
                     continue;
@@ -211,65 +335,58 @@ impl Detector {
             merge_sorted(&pairs[..from_broad], &pairs[from_broad..], &mut self.merged);
             std::mem::swap(&mut pairs, &mut self.merged);
         }
-        // Last step's hint of each pair (a binary search per pair: parallel, no serial merge).
-        let previous = &self.hints;
-        let mut hints = std::mem::take(&mut self.pair_hints);
-        pairs
-            .par_iter()
-            .with_min_len(1024)
-            .map(|pair| {
-                previous
-                    .binary_search_by_key(pair, |&(p, _)| p)
-                    .map_or(FaceHint::NONE, |k| previous[k].1)
-            })
-            .collect_into_vec(&mut hints);
-        let mut results = std::mem::take(&mut self.results);
+        // Each pair: last step's outcome, found by a binary search (parallel, no serial merge),
+        // reused if neither body was re-anchored, else computed at the anchors with its hint.
+        let mut results = std::mem::take(&mut self.spare_results);
         let this = &*self;
-        let margins = &self.margins;
+        let (previous_pairs, previous) = (&self.pairs, &self.results);
+        let moved = &self.anchors.moved;
         pairs
             .par_iter()
-            .zip(hints.par_iter())
             .with_min_len(32)
-            .map(|(&(i, j), &hint)| {
+            .map(|&(i, j)| {
                 let (iu, ju) = (i as usize, j as usize);
-                let alert = alert + margins[iu] + margins[ju];
-                match (this.world_poly(bodies, iu), this.world_poly(bodies, ju)) {
+                let last = previous_pairs
+                    .binary_search(&(i, j))
+                    .ok()
+                    .map(|k| &previous[k]);
+                if let Some(last) = last {
+                    if last.reusable && !moved[iu] && !moved[ju] {
+                        return PairGeometry {
+                            reused: true,
+                            ..*last
+                        };
+                    }
+                }
+                let hint = last.map_or(FaceHint::NONE, |l| l.hint);
+                let alert = alert + reach(margins[iu]) + reach(margins[ju]);
+                let reusable = reuse > 0.0 && margins[iu] <= reuse && margins[ju] <= reuse;
+                let geometry = match (this.world_poly(bodies, iu), this.world_poly(bodies, ju)) {
                     (Some(a), Some(b)) => {
                         let (m, hint) = narrow::polyhedron_polyhedron_hinted(&a, &b, alert, hint);
-                        (i, j, m, hint)
+                        PairGeometry::new(i, j, m, hint)
                     }
                     (None, Some(b)) => {
-                        let (nrm, off) = plane_world(bodies, iu);
-                        (
-                            i,
-                            j,
-                            narrow::plane_polyhedron(nrm, off, &b, alert),
-                            FaceHint::NONE,
-                        )
+                        let (nrm, off) = plane_world(&this.anchors, bodies, iu);
+                        let m = narrow::plane_polyhedron(nrm, off, &b, alert);
+                        PairGeometry::new(i, j, m, FaceHint::NONE)
                     }
                     (Some(a), None) => {
-                        let (nrm, off) = plane_world(bodies, ju);
-                        (
-                            j,
-                            i,
-                            narrow::plane_polyhedron(nrm, off, &a, alert),
-                            FaceHint::NONE,
-                        )
+                        let (nrm, off) = plane_world(&this.anchors, bodies, ju);
+                        let m = narrow::plane_polyhedron(nrm, off, &a, alert);
+                        PairGeometry::new(j, i, m, FaceHint::NONE)
                     }
-                    (None, None) => (i, j, None, FaceHint::NONE),
+                    (None, None) => PairGeometry::new(i, j, None, FaceHint::NONE),
+                };
+                PairGeometry {
+                    reusable,
+                    ..geometry
                 }
             })
             .collect_into_vec(&mut results);
-        pairs
-            .par_iter()
-            .zip(results.par_iter())
-            .with_min_len(1024)
-            .map(|(&p, r)| (p, r.3))
-            .collect_into_vec(&mut self.hints);
-        write_points(&results, out);
-        self.pairs = pairs;
-        self.pair_hints = hints;
-        self.results = results;
+        write_points(&results, &self.anchors, bodies, reuse > 0.0, out);
+        self.spare_pairs = std::mem::replace(&mut self.pairs, pairs);
+        self.spare_results = std::mem::replace(&mut self.results, results);
     }
 }
 
@@ -291,13 +408,21 @@ fn merge_sorted<T: Copy + Ord>(a: &[T], b: &[T], out: &mut Vec<T>) {
 }
 
 /// The manifolds' points, in pair order, written into `out` in parallel: each chunk of
-/// results knows where its points start from the counts of the chunks before it.
-fn write_points(results: &[NarrowResult], out: &mut Vec<RawContact>) {
+/// results knows where its points start from the counts of the chunks before it. With
+/// `transport`, each point is carried from the anchor poses to the current ones: its foot on
+/// each surface (`p ∓ g/2 n`) moves with its body, the normal with body 1, and the gap is the
+/// distance between the feet along the normal.
+fn write_points(
+    results: &[PairGeometry],
+    anchors: &Anchors,
+    bodies: &BodySet,
+    transport: bool,
+    out: &mut Vec<RawContact>,
+) {
     const CHUNK: usize = 1024;
-    let count = |r: &NarrowResult| r.2.as_ref().map_or(0, |m| m.points.len());
     let counts: Vec<usize> = results
         .par_chunks(CHUNK)
-        .map(|c| c.iter().map(count).sum())
+        .map(|c| c.iter().map(|r| r.len as usize).sum())
         .collect();
     let blank = RawContact {
         body1: 0,
@@ -312,30 +437,45 @@ fn write_points(results: &[NarrowResult], out: &mut Vec<RawContact>) {
         .into_par_iter()
         .zip(results.par_chunks(CHUNK))
         .for_each(|(dst, chunk)| {
-            let points = chunk.iter().filter_map(|(b1, b2, m, _)| {
-                m.as_ref().map(|m| {
-                    m.points.iter().map(move |p| RawContact {
-                        body1: *b1,
-                        body2: *b2,
-                        point: p.point,
-                        normal: m.normal,
-                        gap: p.gap,
-                    })
-                })
-            });
-            for (d, p) in dst.iter_mut().zip(points.flatten()) {
-                *d = p;
+            let mut d = dst.iter_mut();
+            for r in chunk {
+                let (b1, b2) = (r.body1 as usize, r.body2 as usize);
+                let still = !transport || anchors.is_at_anchor(b1) && anchors.is_at_anchor(b2);
+                for p in r.points() {
+                    let Some(slot) = d.next() else { return };
+                    *slot = if still {
+                        RawContact {
+                            body1: r.body1,
+                            body2: r.body2,
+                            point: p.point,
+                            normal: r.normal,
+                            gap: p.gap,
+                        }
+                    } else {
+                        let foot1 = anchors.transport(bodies, b1, p.point - 0.5 * p.gap * r.normal);
+                        let foot2 = anchors.transport(bodies, b2, p.point + 0.5 * p.gap * r.normal);
+                        let normal = anchors.turn(b1, r.normal);
+                        RawContact {
+                            body1: r.body1,
+                            body2: r.body2,
+                            point: 0.5 * (foot1 + foot2),
+                            normal,
+                            gap: normal.dot(foot2 - foot1),
+                        }
+                    };
+                }
             }
         });
 }
 
-/// World normal and offset (`n·x = offset` on the boundary) of half-space body `i`.
-fn plane_world(bodies: &BodySet, i: usize) -> (DVec3, f64) {
+/// World normal and offset (`n·x = offset` on the boundary) of half-space body `i` at its
+/// anchor pose.
+fn plane_world(anchors: &Anchors, bodies: &BodySet, i: usize) -> (DVec3, f64) {
     let Shape::Plane { normal } = &bodies.shape[i] else {
         unreachable!("plane_world called on a polyhedron")
     };
-    let n = bodies.orientation[i] * *normal;
-    (n, n.dot(bodies.position[i]))
+    let n = anchors.orientation[i] * *normal;
+    (n, n.dot(anchors.position[i]))
 }
 
 #[cfg(test)]

@@ -12,12 +12,15 @@
 //!   step it holds the previous step's contacts, the source of the warm start, so without it
 //!   the first resumed step would start NLGS from zero impulses and the run would diverge;
 //! * time, step index and the cumulated phase timers;
+//! * the detection's anchor poses (see [`crate::detection::coherence`]): the contact
+//!   manifolds of the next steps are computed there, so without them a resumed run would
+//!   detect at other poses than the uninterrupted one;
 //! * optionally the [`RunStats`] of the run so far, so a resumed run's summary covers all steps;
 //! * the scene description (see below).
 //!
 //! Every `f64` is stored as its exact IEEE-754 bits: a resumed run continues bit-identically.
 //!
-//! # File format, version 1
+//! # File format, version 2 (version 1 still read)
 //!
 //! All integers little-endian; `f64` as the little-endian bytes of [`f64::to_bits`]; a vector is
 //! `x, y, z`; a quaternion is `x, y, z, w`. An "array" is a `u64` element count followed by the
@@ -46,15 +49,16 @@
 //! | *clock*              | time `f64`, step index `u64`, timers: array of (`u64` name length, UTF-8 name of a [`PhaseTimes`] field, `f64` seconds) |
 //! | *bodies*             | `u64` count `n`, then field by field (structure of arrays, `n` values each): positions, orientations, velocities, angular velocities, angular momenta |
 //! | *contacts*           | `u64` count `m`, then field by field (`m` values each): body 1 `u32`, body 2 `u32`, point, frame (`n, t, s`: 3 vectors), gap `f64`, μ `f64`, impulse, status `u8` (0 no contact, 1 stick, 2 slide), local point |
+//! | *anchors*            | `u8` 0 (absent) or 1 then the `n` anchor positions, then the `n` anchor orientations (version ≥ 2; a version 1 file has no such field) |
 //! | *run statistics*     | `u8` 0 (absent) or 1 then steps `u64`, contacts sum `u64`, contacts max `u64`, iterations sum `u64`, max residual `f64`, steps not converged `u64`, max penetration `f64` |
 //!
 //! The shape hash is [`fnv1a64`] over the shape kind and its exact geometry (vertices, faces,
 //! radius); the driver hash over the driver's JSON. Settings travel whole, as JSON, so a
 //! setting added later (domain decomposition, say) is covered without a format change.
 //!
-//! Size: 181 bytes per body plus 169 bytes per contact point, plus under 1 kB. For 1,000
-//! grains: 183 kB while they fall, 0.83 MB with 3,850 contact points (a pile settling; a
-//! dense pile with 6–8 points per grain gives about 1.2–1.6 MB).
+//! Size: 237 bytes per body plus 169 bytes per contact point, plus under 1 kB. For 1,000
+//! grains: 239 kB while they fall, 0.89 MB with 3,850 contact points (a pile settling; a
+//! dense pile with 6–8 points per grain gives about 1.3–1.6 MB).
 //!
 //! Anything added to [`World`] that carries over from one step to the next must be added
 //! here (and [`FORMAT_VERSION`] bumped); the `checkpoints_cover_all_state_fields` test fails
@@ -82,7 +86,10 @@ use std::path::{Path, PathBuf};
 /// The magic bytes every checkpoint starts with.
 pub const MAGIC: &[u8; 11] = b"BALLASTCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
+/// The oldest format version this build still reads (version 1 has no anchor poses: a run
+/// resumed from it detects every pair anew at its first step).
+pub const OLDEST_VERSION: u32 = 1;
 /// Magic, version, payload length.
 const HEADER_LEN: usize = 11 + 4 + 8;
 const CHECKSUM_LEN: usize = 8;
@@ -644,6 +651,15 @@ pub fn encode_checkpoint(world: &World, stats: Option<&RunStats>) -> Vec<u8> {
     c.status.iter().for_each(|&s| p.u8(status_code(s)));
     c.local_point.iter().for_each(|&v| p.vec3(v));
 
+    let a = world.detector.anchors();
+    if a.position.len() == b.len() && a.orientation.len() == b.len() {
+        p.u8(1);
+        a.position.iter().for_each(|&v| p.vec3(v));
+        a.orientation.iter().for_each(|&q| p.quat(q));
+    } else {
+        p.u8(0);
+    }
+
     match stats {
         None => p.u8(0),
         Some(s) => {
@@ -714,11 +730,13 @@ struct Decoded {
     angular_velocity: Vec<DVec3>,
     angular_momentum: Vec<DVec3>,
     contacts: ContactSet,
+    /// Detection anchor poses (version ≥ 2, when the writer had them).
+    anchors: Option<(Vec<DVec3>, Vec<DQuat>)>,
     stats: Option<RunStats>,
 }
 
 /// Checks the frame (magic, length, checksum, version) and returns the payload.
-fn unframe<'a>(bytes: &'a [u8], path: &Path) -> Result<&'a [u8], CheckpointError> {
+fn unframe<'a>(bytes: &'a [u8], path: &Path) -> Result<(&'a [u8], u32), CheckpointError> {
     let corrupted = |reason| CheckpointError::Corrupted {
         path: path.to_path_buf(),
         reason,
@@ -760,17 +778,17 @@ fn unframe<'a>(bytes: &'a [u8], path: &Path) -> Result<&'a [u8], CheckpointError
     }
     // The frame is shared by all versions, so an intact file with another version number was
     // genuinely written in another format.
-    if version != FORMAT_VERSION {
+    if !(OLDEST_VERSION..=FORMAT_VERSION).contains(&version) {
         return Err(CheckpointError::UnsupportedVersion {
             path: path.to_path_buf(),
             found: version,
             supported: FORMAT_VERSION,
         });
     }
-    Ok(&bytes[HEADER_LEN..body_end])
+    Ok((&bytes[HEADER_LEN..body_end], version))
 }
 
-fn decode_payload(payload: &[u8]) -> DecResult<Decoded> {
+fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
     let mut d = Dec {
         bytes: payload,
         pos: 0,
@@ -803,6 +821,19 @@ fn decode_payload(payload: &[u8]) -> DecResult<Decoded> {
     let mut c = ContactSet::default();
     decode_contacts(&mut d, m, n, &mut c)?;
 
+    let anchors = match version {
+        1 => None,
+        _ => match d.u8("anchors flag")? {
+            0 => None,
+            1 => {
+                let position = d.vec(n, |d| d.vec3("anchor position"))?;
+                let orientation = d.vec(n, |d| d.quat("anchor orientation"))?;
+                Some((position, orientation))
+            }
+            f => return Err(format!("anchors flag {f} is not 0 or 1")),
+        },
+    };
+
     let stats = match d.u8("statistics flag")? {
         0 => None,
         1 => {
@@ -829,6 +860,7 @@ fn decode_payload(payload: &[u8]) -> DecResult<Decoded> {
         angular_velocity,
         angular_momentum,
         contacts: c,
+        anchors,
         stats,
     })
 }
@@ -920,8 +952,8 @@ fn load(path: &Path) -> Result<Decoded, CheckpointError> {
         path: path.to_path_buf(),
         source,
     })?;
-    let payload = unframe(&bytes, path)?;
-    decode_payload(payload).map_err(|why| CheckpointError::Corrupted {
+    let (payload, version) = unframe(&bytes, path)?;
+    decode_payload(payload, version).map_err(|why| CheckpointError::Corrupted {
         path: path.to_path_buf(),
         reason: Corruption::Malformed(why),
     })
@@ -942,6 +974,8 @@ fn apply(d: Decoded, path: &Path, world: &mut World) -> Result<Option<RunStats>,
     b.angular_velocity = d.angular_velocity;
     b.angular_momentum = d.angular_momentum;
     world.contacts = d.contacts;
+    let (position, orientation) = d.anchors.unwrap_or_default();
+    world.detector.set_anchors(position, orientation);
     world.time = d.time;
     world.step_index = d.step_index;
     // Released bodies follow the checkpoint's clock, whichever world reads it.

@@ -8,6 +8,7 @@
 //! theta = 0.5          # in [0.5, 1]
 //! gravity = [0, 0, -9.81]
 //! alert = 1e-3         # m
+//! reuse_distance = 1e-5 # m: contact geometry reused until a grain moved this far (0 = never)
 //! output_interval = 50 # steps between rows of series.csv
 //! checkpoint_interval = 1000 # steps between checkpoints (0 = only at the end)
 //! vtk_interval = 500   # steps between ParaView frames (0 = none)
@@ -101,6 +102,10 @@ pub struct Simulation {
     pub gravity: [f64; 3],
     #[serde(default = "default_alert")]
     pub alert: f64,
+    /// Detection reuses a pair's manifold until a point of either body moved this far (m);
+    /// 0 = every pair detected anew each step (see `StepSettings::reuse_distance`).
+    #[serde(default = "crate::world::default_reuse_distance")]
+    pub reuse_distance: f64,
     #[serde(default = "default_interval")]
     pub output_interval: u64,
     /// Steps between checkpoints (one is also written at the end of a run); 0 = only at the end.
@@ -294,6 +299,13 @@ impl Scenario {
         finite3("simulation.gravity", s.gravity)?;
         if !(s.alert.is_finite() && s.alert > 0.0) {
             return err(format!("simulation.alert = {} must be > 0 m", s.alert));
+        }
+        if !(s.reuse_distance >= 0.0 && s.reuse_distance <= 0.25 * s.alert) {
+            return err(format!(
+                "simulation.reuse_distance = {} must be in [0, alert/4 = {}] m",
+                s.reuse_distance,
+                0.25 * s.alert
+            ));
         }
         if s.output_interval == 0 {
             return err("simulation.output_interval = 0 must be ≥ 1 step");
@@ -550,6 +562,7 @@ impl Scenario {
             theta: s.theta,
             gravity: vec3(s.gravity),
             alert: s.alert,
+            reuse_distance: s.reuse_distance,
             solver: self.solver.clone(),
             correction: self.correction.clone(),
             ddm: self.ddm.clone(),
