@@ -124,7 +124,10 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() {
         assert!(loaded > 5, "only {loaded} loaded contacts at the split");
         // So must the detection's reuse of manifolds (anchor poses saved, cache rebuilt).
         let (reused, pairs) = first.detection_reuse();
-        assert!(reused > 0, "no manifold reused at the split ({pairs} pairs)");
+        assert!(
+            reused > 0,
+            "no manifold reused at the split ({pairs} pairs)"
+        );
         write_checkpoint_with_stats(&first, Some(&stats), &path).unwrap();
     }
 

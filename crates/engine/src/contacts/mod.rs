@@ -104,7 +104,13 @@ impl ContactSet {
         self.mu.resize(n, 0.0);
         self.impulse.resize(n, DVec3::ZERO);
         self.status.resize(n, ContactStatus::NoContact);
-        self.local_point.resize(n, DVec3::ZERO);
+        // Body-1 frame points first: the matching compares each contact of a pair with the
+        // pair's earlier ones, which would otherwise transform them again and again.
+        raw.par_iter()
+            .with_min_len(1024)
+            .map(|c| local_point(bodies, c))
+            .collect_into_vec(&mut self.local_point);
+        let locals = &self.local_point;
         (
             &mut self.body1,
             &mut self.body2,
@@ -114,35 +120,31 @@ impl ContactSet {
             &mut self.mu,
             &mut self.impulse,
             &mut self.status,
-            &mut self.local_point,
         )
             .into_par_iter()
             .enumerate()
             .with_min_len(256)
-            .for_each(
-                |(k, (b1, b2, point, frame, gap, mu, impulse, status, local))| {
-                    let c = &raw[k];
-                    let matched = match_in_pair(raw, k, bodies, previous, match_fraction);
-                    let (t, s) = frame_from_normal(c.normal);
-                    (*impulse, *status) = match matched {
-                        Some(j) => {
-                            let r = previous.world_impulse(j);
-                            (
-                                DVec3::new(r.dot(c.normal), r.dot(t), r.dot(s)),
-                                previous.status[j],
-                            )
-                        }
-                        None => (DVec3::ZERO, ContactStatus::NoContact),
-                    };
-                    (*b1, *b2, *point, *gap) = (c.body1, c.body2, c.point, c.gap);
-                    *frame = [c.normal, t, s];
-                    *mu = friction.get(
-                        bodies.group[c.body1 as usize],
-                        bodies.group[c.body2 as usize],
-                    );
-                    *local = local_point(bodies, c);
-                },
-            );
+            .for_each(|(k, (b1, b2, point, frame, gap, mu, impulse, status))| {
+                let c = &raw[k];
+                let matched = match_in_pair(raw, locals, k, bodies, previous, match_fraction);
+                let (t, s) = frame_from_normal(c.normal);
+                (*impulse, *status) = match matched {
+                    Some(j) => {
+                        let r = previous.world_impulse(j);
+                        (
+                            DVec3::new(r.dot(c.normal), r.dot(t), r.dot(s)),
+                            previous.status[j],
+                        )
+                    }
+                    None => (DVec3::ZERO, ContactStatus::NoContact),
+                };
+                (*b1, *b2, *point, *gap) = (c.body1, c.body2, c.point, c.gap);
+                *frame = [c.normal, t, s];
+                *mu = friction.get(
+                    bodies.group[c.body1 as usize],
+                    bodies.group[c.body2 as usize],
+                );
+            });
     }
 }
 
@@ -162,6 +164,7 @@ fn local_point(bodies: &BodySet, c: &RawContact) -> DVec3 {
 /// match distance that an earlier point has not taken.
 fn match_in_pair(
     raw: &[RawContact],
+    locals: &[DVec3],
     k: usize,
     bodies: &BodySet,
     previous: &ContactSet,
@@ -191,8 +194,7 @@ fn match_in_pair(
     let (b1, b2) = (raw[k].body1 as usize, raw[k].body2 as usize);
     let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
     let mut taken = None;
-    for c in &raw[first..=k] {
-        let local = local_point(bodies, c);
+    for (c, &local) in raw[first..=k].iter().zip(&locals[first..=k]) {
         let mut best: Option<(f64, usize)> = None;
         for (u, &was_used) in used.iter().enumerate() {
             let j = p0 + u;
