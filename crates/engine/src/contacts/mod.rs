@@ -111,6 +111,24 @@ impl ContactSet {
             .map(|c| local_point(bodies, c))
             .collect_into_vec(&mut self.local_point);
         let locals = &self.local_point;
+        // The old contact each new one takes over, found pair by pair (a pair's points are
+        // consecutive: `raw` is sorted by pair).
+        let starts: Vec<usize> = (0..n)
+            .into_par_iter()
+            .with_min_len(4096)
+            .filter(|&k| k == 0 || raw_key(&raw[k - 1]) != raw_key(&raw[k]))
+            .collect();
+        let mut matched: Vec<Option<usize>> = vec![None; n];
+        let lengths =
+            (0..starts.len()).map(|g| starts.get(g + 1).copied().unwrap_or(n) - starts[g]);
+        let (pieces, _) = crate::slices::split_lengths(&mut matched, lengths);
+        pieces
+            .into_par_iter()
+            .zip(starts.par_iter())
+            .with_min_len(256)
+            .for_each(|(out, &first)| {
+                match_pair(raw, locals, first, out, bodies, previous, match_fraction)
+            });
         (
             &mut self.body1,
             &mut self.body2,
@@ -126,9 +144,8 @@ impl ContactSet {
             .with_min_len(256)
             .for_each(|(k, (b1, b2, point, frame, gap, mu, impulse, status))| {
                 let c = &raw[k];
-                let matched = match_in_pair(raw, locals, k, bodies, previous, match_fraction);
                 let (t, s) = frame_from_normal(c.normal);
-                (*impulse, *status) = match matched {
+                (*impulse, *status) = match matched[k] {
                     Some(j) => {
                         let r = previous.world_impulse(j);
                         (
@@ -159,31 +176,28 @@ fn local_point(bodies: &BodySet, c: &RawContact) -> DVec3 {
     bodies.orientation[b1].inverse() * (c.point - bodies.position[b1])
 }
 
-/// The old contact that detected point `k` takes over, if any: the pair's points, from the
-/// first to `k`, each take the nearest old contact of the same pair (same body 1) within the
-/// match distance that an earlier point has not taken.
-fn match_in_pair(
+/// The old contacts that the detected points `first..first + out.len()` (one pair's) take
+/// over, into `out`: in order, each point takes the nearest old contact of the same pair (same
+/// body 1) within the match distance that an earlier point has not taken.
+fn match_pair(
     raw: &[RawContact],
     locals: &[DVec3],
-    k: usize,
+    first: usize,
+    out: &mut [Option<usize>],
     bodies: &BodySet,
     previous: &ContactSet,
     match_fraction: f64,
-) -> Option<usize> {
-    let key = raw_key(&raw[k]);
-    let mut first = k;
-    while first > 0 && raw_key(&raw[first - 1]) == key {
-        first -= 1;
-    }
-    // The pair's old contacts: a binary search for the first, a short scan for the rest.
+) {
+    let key = raw_key(&raw[first]);
+    // The pair's old contacts: a sorted range of `previous`.
     let p0 = partition(previous, |j| previous.key(j) < key);
     let p1 = (p0..previous.len())
         .find(|&j| previous.key(j) != key)
         .unwrap_or(previous.len());
     if p0 == p1 {
-        return None;
+        out.fill(None);
+        return;
     }
-    // Old contacts taken so far (a pair has at most a few: the manifolds are reduced).
     let (mut small, mut large) = ([false; 16], Vec::new());
     let used: &mut [bool] = if p1 - p0 <= small.len() {
         &mut small[..p1 - p0]
@@ -191,10 +205,10 @@ fn match_in_pair(
         large.resize(p1 - p0, false);
         &mut large
     };
-    let (b1, b2) = (raw[k].body1 as usize, raw[k].body2 as usize);
+    let (b1, b2) = (raw[first].body1 as usize, raw[first].body2 as usize);
     let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
-    let mut taken = None;
-    for (c, &local) in raw[first..=k].iter().zip(&locals[first..=k]) {
+    let range = first..first + out.len();
+    for ((c, &local), taken) in raw[range.clone()].iter().zip(&locals[range]).zip(out) {
         let mut best: Option<(f64, usize)> = None;
         for (u, &was_used) in used.iter().enumerate() {
             let j = p0 + u;
@@ -206,12 +220,11 @@ fn match_in_pair(
                 best = Some((d, j));
             }
         }
-        taken = best.map(|(_, j)| j);
-        if let Some(j) = taken {
+        *taken = best.map(|(_, j)| j);
+        if let Some(j) = *taken {
             used[j - p0] = true;
         }
     }
-    taken
 }
 
 fn partition(set: &ContactSet, pred: impl Fn(usize) -> bool) -> usize {
