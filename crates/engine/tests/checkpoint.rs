@@ -689,3 +689,48 @@ fn checkpoints_cover_all_state_fields() {
         "ContactSet",
     );
 }
+
+/// A version 1 file (written before the detection's anchor poses were stored) still reads: the
+/// run resumes with every body anchored anew at its first step. The same bytes labelled version
+/// 1 with the anchor section left in are refused as malformed, not misread.
+#[test]
+fn version_1_files_still_read() {
+    let s = scenario();
+    let mut w = build(&s);
+    run(&mut w, SPLIT, &mut RunStats::default());
+    let v2 = encode_checkpoint(&w, None);
+    // Payload tail: anchor flag 1, n positions (24 bytes), n orientations (32 bytes), then the
+    // statistics flag 0; then the checksum.
+    let anchors = 1 + 56 * w.bodies.len();
+    let end = v2.len() - 8;
+    assert_eq!((v2[end - 1 - anchors], v2[end - 1]), (1, 0));
+    let relabel = |mut b: Vec<u8>| {
+        b[11..15].copy_from_slice(&1u32.to_le_bytes());
+        let payload = (b.len() - 23) as u64;
+        b[15..23].copy_from_slice(&payload.to_le_bytes());
+        b.extend_from_slice(&[0; 8]);
+        reseal(&mut b);
+        b
+    };
+    let mut v1 = v2[..end - 1 - anchors].to_vec();
+    v1.push(0);
+    let dir = tmp("version1");
+    let path = dir.join("v1.bin");
+    write_bytes(&path, &relabel(v1));
+    let mut resumed = build(&s);
+    read_checkpoint(&path, &mut resumed).expect("a version 1 file reads");
+    assert_eq!(state_digest(&resumed.bodies), state_digest(&w.bodies));
+    assert_eq!(resumed.step_index, w.step_index);
+    resumed.step();
+    assert!(
+        resumed.contacts.len() > 5,
+        "{} contacts",
+        resumed.contacts.len()
+    );
+
+    let e = read_damaged(&dir, "mislabelled.bin", &relabel(v2[..end].to_vec()));
+    assert!(
+        matches!(e, CheckpointError::Corrupted { .. }),
+        "a version 2 payload read as version 1: {e:?}"
+    );
+}
