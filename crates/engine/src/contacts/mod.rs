@@ -121,13 +121,29 @@ impl ContactSet {
         let mut matched: Vec<Option<usize>> = vec![None; n];
         let lengths =
             (0..starts.len()).map(|g| starts.get(g + 1).copied().unwrap_or(n) - starts[g]);
-        let (pieces, _) = crate::slices::split_lengths(&mut matched, lengths);
+        let (mut pieces, _) = crate::slices::split_lengths(&mut matched, lengths);
+        // Both lists are sorted by pair: each run of pairs finds its first pair's old
+        // contacts by bisection, then walks forward with the pairs.
+        const PAIRS_PER_TASK: usize = 256;
         pieces
-            .into_par_iter()
-            .zip(starts.par_iter())
-            .with_min_len(256)
-            .for_each(|(out, &first)| {
-                match_pair(raw, locals, first, out, bodies, previous, match_fraction)
+            .par_chunks_mut(PAIRS_PER_TASK)
+            .zip(starts.par_chunks(PAIRS_PER_TASK))
+            .for_each(|(outs, firsts)| {
+                let key0 = raw_key(&raw[firsts[0]]);
+                let mut p = partition(previous, |j| previous.key(j) < key0);
+                for (out, &first) in outs.iter_mut().zip(firsts) {
+                    let key = raw_key(&raw[first]);
+                    while p < previous.len() && previous.key(p) < key {
+                        p += 1;
+                    }
+                    let p0 = p;
+                    while p < previous.len() && previous.key(p) == key {
+                        p += 1;
+                    }
+                    let new = first..first + out.len();
+                    let (points, locals) = (&raw[new.clone()], &locals[new]);
+                    match_pair(points, locals, out, p0..p, bodies, previous, match_fraction);
+                }
             });
         (
             &mut self.body1,
@@ -176,24 +192,20 @@ fn local_point(bodies: &BodySet, c: &RawContact) -> DVec3 {
     bodies.orientation[b1].inverse() * (c.point - bodies.position[b1])
 }
 
-/// The old contacts that the detected points `first..first + out.len()` (one pair's) take
-/// over, into `out`: in order, each point takes the nearest old contact of the same pair (same
-/// body 1) within the match distance that an earlier point has not taken.
+/// The old contacts that the detected `points` of one pair (`locals`: in body 1's frame) take
+/// over, into `out`: in order, each point takes the nearest old contact of the same pair (the
+/// range `old` of `previous`; same body 1) within the match distance that an earlier point has
+/// not taken.
 fn match_pair(
-    raw: &[RawContact],
+    points: &[RawContact],
     locals: &[DVec3],
-    first: usize,
     out: &mut [Option<usize>],
+    old: std::ops::Range<usize>,
     bodies: &BodySet,
     previous: &ContactSet,
     match_fraction: f64,
 ) {
-    let key = raw_key(&raw[first]);
-    // The pair's old contacts: a sorted range of `previous`.
-    let p0 = partition(previous, |j| previous.key(j) < key);
-    let p1 = (p0..previous.len())
-        .find(|&j| previous.key(j) != key)
-        .unwrap_or(previous.len());
+    let (p0, p1) = (old.start, old.end);
     if p0 == p1 {
         out.fill(None);
         return;
@@ -205,10 +217,9 @@ fn match_pair(
         large.resize(p1 - p0, false);
         &mut large
     };
-    let (b1, b2) = (raw[first].body1 as usize, raw[first].body2 as usize);
+    let (b1, b2) = (points[0].body1 as usize, points[0].body2 as usize);
     let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
-    let range = first..first + out.len();
-    for ((c, &local), taken) in raw[range.clone()].iter().zip(&locals[range]).zip(out) {
+    for ((c, &local), taken) in points.iter().zip(locals).zip(out) {
         let mut best: Option<(f64, usize)> = None;
         for (u, &was_used) in used.iter().enumerate() {
             let j = p0 + u;

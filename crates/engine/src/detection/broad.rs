@@ -17,6 +17,9 @@ use rayon::prelude::*;
 
 /// Slots of the hashed grid per parallel task of the pair search.
 const SLOTS_PER_TASK: usize = 4096;
+/// Box tests above which [`BroadPhase::update_pairs`] runs a full pass instead (about a
+/// millisecond of tests: the order of a full pass over 20,000 boxes).
+const INCREMENTAL_TESTS: usize = 4_000_000;
 
 /// Axis-aligned bounding box.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -36,6 +39,12 @@ impl Aabb {
 /// Reusable broad-phase buffers.
 #[derive(Default, Debug)]
 pub struct BroadPhase {
+    /// The boxes, candidates and pairs of the last call (see [`BroadPhase::update_pairs`]).
+    last_aabbs: Vec<Aabb>,
+    last_candidates: Vec<u32>,
+    last_pairs: Vec<(u32, u32)>,
+    /// Scratch: which boxes changed since the last call.
+    changed: Vec<bool>,
     entries: Vec<(u32, [i32; 3])>,
     slot_of: Vec<u32>,
     start: Vec<u32>,
@@ -57,6 +66,78 @@ fn hash(c: [i32; 3], mask: u32) -> u32 {
 }
 
 impl BroadPhase {
+    /// [`BroadPhase::find_pairs`] for a scene where few boxes changed since the last call:
+    /// the last call's pairs between unchanged boxes are kept, and the pairs of each changed
+    /// box are found by testing it against every candidate. The result is the same set (every
+    /// overlapping pair not skipped, sorted), so callers cannot tell the two apart. A full
+    /// pass runs instead on the first call, when the candidates differ, when `same_skip` is
+    /// false (the skip rule changed since the last call), or when the changed boxes times the
+    /// candidates exceed `INCREMENTAL_TESTS` box tests.
+    pub fn update_pairs(
+        &mut self,
+        aabbs: &[Aabb],
+        candidates: &[u32],
+        skip: impl Fn(u32, u32) -> bool + Sync,
+        same_skip: bool,
+        pairs: &mut Vec<(u32, u32)>,
+    ) {
+        let comparable =
+            same_skip && self.last_aabbs.len() == aabbs.len() && self.last_candidates == candidates;
+        let changed: Vec<u32> = if comparable {
+            let last = &self.last_aabbs;
+            candidates
+                .par_iter()
+                .with_min_len(4096)
+                .filter(|&&i| aabbs[i as usize] != last[i as usize])
+                .copied()
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if !comparable || changed.len().saturating_mul(candidates.len()) > INCREMENTAL_TESTS {
+            self.find_pairs(aabbs, candidates, &skip, pairs);
+        } else {
+            self.changed.clear();
+            self.changed.resize(aabbs.len(), false);
+            for &c in &changed {
+                self.changed[c as usize] = true;
+            }
+            let is_changed = &self.changed;
+            pairs.clear();
+            pairs.par_extend(
+                self.last_pairs
+                    .par_iter()
+                    .with_min_len(4096)
+                    .filter(|&&(i, j)| !is_changed[i as usize] && !is_changed[j as usize])
+                    .copied(),
+            );
+            // A pair of two changed boxes is reported by its lower index only.
+            let mut fresh: Vec<(u32, u32)> = changed
+                .par_iter()
+                .flat_map_iter(|&c| {
+                    let bc = aabbs[c as usize];
+                    candidates
+                        .iter()
+                        .filter(move |&&o| {
+                            o != c
+                                && !(is_changed[o as usize] && o < c)
+                                && bc.overlaps(&aabbs[o as usize])
+                        })
+                        .map(move |&o| (c.min(o), c.max(o)))
+                })
+                .filter(|&(p, q)| !skip(p, q))
+                .collect();
+            fresh.par_sort_unstable();
+            let kept = std::mem::take(pairs);
+            super::merge_sorted(&kept, &fresh, pairs);
+        }
+        self.last_aabbs.clear();
+        self.last_aabbs.extend_from_slice(aabbs);
+        self.last_candidates.clear();
+        self.last_candidates.extend_from_slice(candidates);
+        self.last_pairs.clone_from(pairs);
+    }
+
     /// Appends to `pairs` every `(i, j)`, `i < j`, whose boxes overlap, among the bodies
     /// `candidates`, skipping pairs for which `skip(i, j)` is true (e.g. two fixed bodies).
     /// `pairs` is sorted on return.
@@ -243,5 +324,58 @@ mod tests {
             }
             assert_eq!(pairs, brute, "n = {n}");
         }
+    }
+
+    /// Updating from the last call's pairs finds the same pairs as brute force, step after step
+    /// of random moves of a few boxes (the incremental path) or of many (the full pass), and
+    /// when the skip rule changes.
+    #[test]
+    fn updated_pairs_equal_brute_force() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let n = 2000;
+        let random_box = |rng: &mut rand_chacha::ChaCha8Rng| {
+            let c = DVec3::new(rng.gen(), rng.gen(), rng.gen()) * 0.4;
+            let h = DVec3::splat(rng.gen_range(0.01..0.04));
+            Aabb {
+                min: c - h,
+                max: c + h,
+            }
+        };
+        let mut boxes: Vec<Aabb> = (0..n).map(|_| random_box(&mut rng)).collect();
+        boxes.push(Aabb {
+            min: DVec3::splat(-1.0),
+            max: DVec3::new(1.0, 1.0, 0.02),
+        });
+        let all: Vec<u32> = (0..boxes.len() as u32).collect();
+        let mut bp = BroadPhase::default();
+        let mut pairs = Vec::new();
+        let mut incremental = 0;
+        for step in 0..40 {
+            // Skip pairs of two multiples of `m`; the rule changes at step 20.
+            let m = if step < 20 { 7 } else { 5 };
+            let skip = move |i: u32, j: u32| i.is_multiple_of(m) && j.is_multiple_of(m);
+            let moved = [0, 1, 3, 40, 2001][step % 5];
+            for _ in 0..moved {
+                let k = rng.gen_range(0..n);
+                let shift = DVec3::new(rng.gen(), rng.gen(), rng.gen()) * 0.02;
+                boxes[k] = Aabb {
+                    min: boxes[k].min + shift,
+                    max: boxes[k].max + shift,
+                };
+            }
+            let before = bp.last_pairs.len();
+            bp.update_pairs(&boxes, &all, skip, step != 20, &mut pairs);
+            incremental += usize::from(moved <= 40 && step != 20 && before > 0);
+            let mut brute = Vec::new();
+            for i in 0..boxes.len() {
+                for j in i + 1..boxes.len() {
+                    if boxes[i].overlaps(&boxes[j]) && !skip(i as u32, j as u32) {
+                        brute.push((i as u32, j as u32));
+                    }
+                }
+            }
+            assert_eq!(pairs, brute, "step {step}, {moved} boxes moved");
+        }
+        assert!(incremental > 20);
     }
 }

@@ -63,6 +63,8 @@ pub struct Detector {
     spare_pairs: Vec<(u32, u32)>,
     spare_results: Vec<PairGeometry>,
     merged: Vec<(u32, u32)>,
+    /// The body kinds of the last detection (the broad phase's skip rule depends on them).
+    kinds: Vec<BodyKind>,
 }
 
 /// A pair's narrow-phase outcome at the anchor poses: bodies (body 1 first), manifold (`len`
@@ -307,12 +309,18 @@ impl Detector {
         let planes: Vec<u32> = (0..n as u32).filter(|&i| is_plane(i as usize)).collect();
         let dynamic = |i: u32| bodies.kind[i as usize] == BodyKind::Dynamic;
         let mut pairs = std::mem::take(&mut self.spare_pairs);
-        self.broad.find_pairs(
+        // Which pairs are skipped depends on the kinds (a released body becomes dynamic).
+        let same_kinds = self.kinds == bodies.kind;
+        self.broad.update_pairs(
             &self.aabbs,
             &polys,
             |i, j| !dynamic(i) && !dynamic(j),
+            same_kinds,
             &mut pairs,
         );
+        if !same_kinds {
+            self.kinds.clone_from(&bodies.kind);
+        }
         // Half-spaces against every dynamic polyhedron whose box reaches within `alert`.
         let from_broad = pairs.len();
         for &p in &planes {
