@@ -277,27 +277,38 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
+    /// `n` random cubes (half-sides up to `half`) in a cube of side `side`, then one large box
+    /// reaching into negative coordinates.
+    fn random_boxes(
+        rng: &mut rand_chacha::ChaCha8Rng,
+        n: usize,
+        side: f64,
+        half: f64,
+    ) -> Vec<Aabb> {
+        let mut boxes: Vec<Aabb> = (0..n)
+            .map(|_| {
+                let c = DVec3::new(rng.gen(), rng.gen(), rng.gen()) * side;
+                let h = DVec3::splat(rng.gen_range(0.01..half));
+                Aabb {
+                    min: c - h,
+                    max: c + h,
+                }
+            })
+            .collect();
+        boxes.push(Aabb {
+            min: DVec3::splat(-1.0),
+            max: DVec3::new(1.0, 1.0, 0.02),
+        });
+        boxes
+    }
+
     /// The grid finds exactly the overlapping pairs that brute force finds.
     #[test]
     fn grid_equals_brute_force() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         // 5000 boxes: many tasks of the parallel pair search.
         for n in [1usize, 2, 10, 300, 5000] {
-            let mut boxes: Vec<Aabb> = (0..n)
-                .map(|_| {
-                    let c = DVec3::new(rng.gen(), rng.gen(), rng.gen()) * 0.5;
-                    let h = DVec3::splat(rng.gen_range(0.01..0.05));
-                    Aabb {
-                        min: c - h,
-                        max: c + h,
-                    }
-                })
-                .collect();
-            // One large body and negative coordinates.
-            boxes.push(Aabb {
-                min: DVec3::splat(-1.0),
-                max: DVec3::new(1.0, 1.0, 0.02),
-            });
+            let boxes = random_boxes(&mut rng, n, 0.5, 0.05);
             let all: Vec<u32> = (0..boxes.len() as u32).collect();
             let mut bp = BroadPhase::default();
             let mut pairs = Vec::new();
@@ -333,19 +344,7 @@ mod tests {
     fn updated_pairs_equal_brute_force() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         let n = 2000;
-        let random_box = |rng: &mut rand_chacha::ChaCha8Rng| {
-            let c = DVec3::new(rng.gen(), rng.gen(), rng.gen()) * 0.4;
-            let h = DVec3::splat(rng.gen_range(0.01..0.04));
-            Aabb {
-                min: c - h,
-                max: c + h,
-            }
-        };
-        let mut boxes: Vec<Aabb> = (0..n).map(|_| random_box(&mut rng)).collect();
-        boxes.push(Aabb {
-            min: DVec3::splat(-1.0),
-            max: DVec3::new(1.0, 1.0, 0.02),
-        });
+        let mut boxes = random_boxes(&mut rng, n, 0.4, 0.04);
         let all: Vec<u32> = (0..boxes.len() as u32).collect();
         let mut bp = BroadPhase::default();
         let mut pairs = Vec::new();
