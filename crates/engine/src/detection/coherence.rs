@@ -13,10 +13,10 @@
 //! body is within `δ` of where the manifold saw it. Gaps are recomputed from the current poses:
 //! for a face–vertex contact (the common case) the recomputed gap is exact whatever the sliding,
 //! and in general it is off by at most the rotation since the anchor times the contact's
-//! tangential drift (≈ `2δ²/ρ`, 4e-9 m for `δ` = 10 µm and a grain of circumradius 5 cm). Contact points
-//! are off by at most `δ` tangentially. Pairs are detected with the alert distance grown by
-//! `2δ` per body (displacement allowance plus slow-body margin), so no point that comes within
-//! the alert distance is missed.
+//! tangential drift (≈ `2δ²/ρ`: 4e-9 m for `δ` = 10 µm and a circumradius of 5 cm). Contact
+//! points are off by at most `δ` tangentially. Pairs are detected with the alert distance grown
+//! by `2δ` per body (displacement allowance plus slow-body margin), so no point that comes
+//! within the alert distance is missed.
 //!
 //! Why results stay reproducible: the reused manifold is a function of the two anchors alone,
 //! so a run resumed from a checkpoint (which stores the anchors) recomputes, at its first step,
