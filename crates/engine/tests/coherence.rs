@@ -22,7 +22,7 @@ fn deepest(raw: &[RawContact]) -> BTreeMap<(u32, u32), (f64, DVec3)> {
     m
 }
 
-fn bits(raw: &[RawContact]) -> Vec<[u64; 9]> {
+fn bits(raw: &[RawContact]) -> Vec<[u64; 8]> {
     raw.iter()
         .map(|c| {
             let (p, n) = (c.point, c.normal);
@@ -35,7 +35,6 @@ fn bits(raw: &[RawContact]) -> Vec<[u64; 9]> {
                 n.y.to_bits(),
                 n.z.to_bits(),
                 c.gap.to_bits(),
-                0,
             ]
         })
         .collect()

@@ -162,27 +162,27 @@ impl Detector {
     /// the last detection (bodies or shapes replaced: every anchor is then stale).
     fn refresh_layout(&mut self, bodies: &BodySet) -> bool {
         let c = &mut self.cache;
-        let (old_v, old_f) = (
-            std::mem::take(&mut c.vertex_start),
-            std::mem::take(&mut c.face_start),
-        );
+        // A first detection has no layout to compare with (anchors restored from a checkpoint
+        // are then kept).
+        let first = c.vertex_start.is_empty();
+        let n = bodies.len();
+        let mut changed = c.vertex_start.len() != n + 1;
+        c.vertex_start.resize(n + 1, 0);
+        c.face_start.resize(n + 1, 0);
         let (mut nv, mut nf) = (0, 0);
-        for s in &bodies.shape {
-            c.vertex_start.push(nv);
-            c.face_start.push(nf);
-            if let Shape::Polyhedron(p) = s {
+        for i in 0..=n {
+            changed |= c.vertex_start[i] != nv || c.face_start[i] != nf;
+            c.vertex_start[i] = nv;
+            c.face_start[i] = nf;
+            if let Some(Shape::Polyhedron(p)) = bodies.shape.get(i) {
                 nv += p.vertices.len();
                 nf += p.face_normals.len();
             }
         }
-        c.vertex_start.push(nv);
-        c.face_start.push(nf);
         c.vertices.resize(nv, DVec3::ZERO);
         c.normals.resize(nf, DVec3::ZERO);
         c.offsets.resize(nf, 0.0);
-        // A first detection has no layout to compare with (anchors restored from a checkpoint
-        // are then kept).
-        !old_v.is_empty() && (old_v != c.vertex_start || old_f != c.face_start)
+        !first && changed
     }
 
     /// World vertices and face planes of the re-anchored bodies (of every body with `all`), at
