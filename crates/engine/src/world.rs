@@ -16,11 +16,11 @@ use crate::contacts::ContactSet;
 use crate::detection::{Detector, RawContact};
 use crate::laws::FrictionTable;
 use crate::math::{DMat3, DQuat, DVec3};
-use crate::solver::correction::pseudo_velocities;
+use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::build_local_problems;
 use crate::solver::{
-    ddm, CorrectionSettings, DdmSettings, LocalProblem, Nlgs, Partition, SolveReport, SolverBody,
-    SolverSettings,
+    ddm, CorrectionSettings, DdmSettings, DriveRows, LocalProblem, Nlgs, Partition, SolveReport,
+    SolverBody, SolverSettings,
 };
 use crate::timing::{Lap, PhaseTimes};
 use rayon::prelude::*;
@@ -109,6 +109,11 @@ pub struct World {
     free_w: Vec<DVec3>,
     pseudo: Vec<SolverBody>,
     ddm_workspace: ddm::DdmWorkspace,
+    /// The force-limited drives of the last step (their impulses are the machine's forces).
+    drives: Vec<DriveRows>,
+    /// Per body, the body whose velocities it takes in the solver (itself, or the body it is
+    /// attached to); empty when no body is attached.
+    attach: Vec<u32>,
 }
 
 impl World {
@@ -139,7 +144,52 @@ impl World {
             free_w: Vec::new(),
             pseudo: Vec::new(),
             ddm_workspace: ddm::DdmWorkspace::default(),
+            drives: Vec::new(),
+            attach: Vec::new(),
         }
+        .with_attached_velocities()
+    }
+
+    /// Attached bodies start with the velocity of the body they are part of.
+    fn with_attached_velocities(mut self) -> Self {
+        self.refresh_attach();
+        for i in 0..self.attach.len() {
+            let p = self.attach[i] as usize;
+            if p != i {
+                let b = &mut self.bodies;
+                let arm = b.position[i] - b.position[p];
+                b.velocity[i] = b.velocity[p] + b.angular_velocity[p].cross(arm);
+                b.angular_velocity[i] = b.angular_velocity[p];
+            }
+        }
+        self
+    }
+
+    /// Recomputes [`World::attach`] from the drivers (an index out of range attaches nothing;
+    /// scenario files refuse it).
+    fn refresh_attach(&mut self) {
+        let b = &self.bodies;
+        self.attach.clear();
+        if b.driver.iter().flatten().any(|d| d.attached_to.is_some()) {
+            let n = b.len();
+            self.attach.extend((0..n).map(
+                |i| match b.driver[i].as_ref().and_then(|d| d.attached_to) {
+                    Some(p) if p < n && p != i && b.kind[i] == BodyKind::Kinematic => p as u32,
+                    _ => i as u32,
+                },
+            ));
+        }
+    }
+
+    /// The driver of body `i` if it is a force-limited driven body this step.
+    pub fn force_limited(&self, i: usize) -> Option<&crate::bodies::Driver> {
+        force_limited(&self.bodies, i)
+    }
+
+    /// The force-limited drives of the last step, in body order: `impulse_v / dt` is the force
+    /// each drive exerted on its body (N), `impulse_w / dt` the torque.
+    pub fn drives(&self) -> &[DriveRows] {
+        &self.drives
     }
 
     /// The partition of this step: boxes over the dynamic bodies' centres, weighted by
@@ -151,11 +201,10 @@ impl World {
             weights[self.contacts.body1[k] as usize] += 1.0;
             weights[self.contacts.body2[k] as usize] += 1.0;
         }
-        let dynamic: Vec<bool> = self
-            .bodies
-            .kind
-            .iter()
-            .map(|k| *k == BodyKind::Dynamic)
+        // Force-limited driven bodies are written by the solver: they belong to the subdomain
+        // of their centre like the grains.
+        let dynamic: Vec<bool> = (0..n)
+            .map(|i| self.bodies.kind[i] == BodyKind::Dynamic || self.force_limited(i).is_some())
             .collect();
         Partition::build(
             &self.bodies.position,
@@ -193,6 +242,7 @@ impl World {
     /// Steps 1–3 up to the local problems: detection at `qᵢ` with warm start, free velocities,
     /// local problems. Returns the largest overlap and the phase times so far.
     pub fn prepare(&mut self) -> (f64, PhaseTimes) {
+        self.refresh_attach();
         let s = &self.settings;
         let h = s.dt;
         let t1 = self.time + h;
@@ -225,10 +275,14 @@ impl World {
         // 2. Free velocities.
         let b = &self.bodies;
         let gravity = s.gravity;
+        let t0 = self.time;
         (0..b.len())
             .into_par_iter()
             .with_min_len(256)
             .map(|i| {
+                if let Some(d) = force_limited(b, i) {
+                    return limited_free_body(b, i, d, t0, t1);
+                }
                 let (v, w) = match b.kind[i] {
                     BodyKind::Dynamic => (b.velocity[i] + gravity * h, b.angular_velocity[i]),
                     BodyKind::Kinematic => match &b.driver[i] {
@@ -249,12 +303,35 @@ impl World {
                 }
             })
             .collect_into_vec(&mut self.solver_bodies);
+        self.drives.clear();
+        for i in 0..b.len() {
+            if let Some(d) = force_limited(b, i) {
+                let (target_v, target_w) = d.velocity(t1);
+                self.drives.push(DriveRows {
+                    body: i as u32,
+                    target_v,
+                    target_w,
+                    bound_v: DVec3::from_array(d.max_force) * h,
+                    bound_w: DVec3::from_array(d.max_torque) * h,
+                    impulse_v: DVec3::ZERO,
+                    impulse_w: DVec3::ZERO,
+                    translate: d.limits_translation(),
+                    rotate: d.limits_rotation(),
+                });
+            }
+        }
         self.free_w.clear();
         self.free_w.extend(self.solver_bodies.iter().map(|sb| sb.w));
         times.other += lap.lap();
 
         // 3. Local problems.
-        build_local_problems(&self.contacts, b, &self.solver_bodies, &mut self.locals);
+        build_local_problems(
+            &self.contacts,
+            b,
+            &self.solver_bodies,
+            &self.attach,
+            &mut self.locals,
+        );
         times.nlgs += lap.lap();
         (max_penetration, times)
     }
@@ -271,8 +348,9 @@ impl World {
         // same split).
         let (solve, corrected) = match &s.ddm {
             None => {
-                let report = nlgs.solve(
+                let report = nlgs.solve_with_drives(
                     &mut self.locals,
+                    &mut self.drives,
                     &mut self.solver_bodies,
                     &mut self.contacts.status,
                 );
@@ -293,6 +371,7 @@ impl World {
                     d,
                     &partition,
                     &mut self.locals,
+                    &mut self.drives,
                     &mut self.solver_bodies,
                     &mut self.contacts.status,
                     Some(ddm::CorrectionPass {
@@ -308,6 +387,25 @@ impl World {
         };
         for (r, c) in self.contacts.impulse.iter_mut().zip(&self.locals) {
             *r = c.r;
+        }
+        // A driven body moves as its drive says: the position-only overlap correction pushes
+        // the grains off it, not it off the grains.
+        if corrected {
+            for d in &self.drives {
+                self.pseudo[d.body as usize] =
+                    correction::at_rest(&self.pseudo[d.body as usize], false);
+            }
+        }
+        // Attached bodies move with the body they are part of.
+        for (i, &p) in self.attach.iter().enumerate() {
+            let p = p as usize;
+            if p != i {
+                let arm = self.bodies.position[i] - self.bodies.position[p];
+                let parent = self.solver_bodies[p];
+                let sb = &mut self.solver_bodies[i];
+                sb.v = parent.v + parent.w.cross(arm);
+                sb.w = parent.w;
+            }
         }
         times.nlgs += lap.lap();
         let free_w = &self.free_w;
@@ -367,5 +465,49 @@ impl World {
             max_penetration,
             times,
         }
+    }
+}
+
+/// The driver of body `i` if it is driven (not yet released) with a force limit.
+fn force_limited(b: &BodySet, i: usize) -> Option<&crate::bodies::Driver> {
+    match (b.kind[i], &b.driver[i]) {
+        (BodyKind::Kinematic, Some(d)) if d.is_force_limited() => Some(d),
+        _ => None,
+    }
+}
+
+/// Free velocities of a force-limited driven body over `[t0, t1]`: a limited part keeps the
+/// velocity it had, less the superposed velocity of `t0`, plus that of `t1` (its weight is
+/// carried by the drive); an unlimited part takes the program's velocity at `t1`. The body
+/// has its mass (inertia) in the solver where its translation (rotation) is limited.
+fn limited_free_body(
+    b: &BodySet,
+    i: usize,
+    d: &crate::bodies::Driver,
+    t0: f64,
+    t1: f64,
+) -> SolverBody {
+    let (pv, pw) = d.velocity(t1);
+    let (s0v, s0w) = d.superposed.at(t0);
+    let (s1v, s1w) = d.superposed.at(t1);
+    let (translate, rotate) = (d.limits_translation(), d.limits_rotation());
+    let r = DMat3::from_quat(b.orientation[i]);
+    SolverBody {
+        v: if translate {
+            b.velocity[i] - s0v + s1v
+        } else {
+            pv
+        },
+        w: if rotate {
+            b.angular_velocity[i] - s0w + s1w
+        } else {
+            pw
+        },
+        inv_mass: if translate { b.inv_mass[i] } else { 0.0 },
+        inv_inertia: if rotate {
+            r * DMat3::from_diagonal(b.inertia[i].recip()) * r.transpose()
+        } else {
+            DMat3::ZERO
+        },
     }
 }

@@ -645,9 +645,12 @@ fn checkpoints_cover_all_state_fields() {
             // from the scenario
             "friction",
             "settings",
-            // rebuilt every step (`previous` is swapped with `contacts` first thing)
+            // rebuilt every step (`previous` is swapped with `contacts` first thing; the
+            // drives start from zero impulse each step, and `attach` comes from the drivers)
             "raw",
             "previous",
+            "drives",
+            "attach",
             "locals",
             "solver_bodies",
             "free_w",

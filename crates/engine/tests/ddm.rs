@@ -107,6 +107,7 @@ fn ddm_with_single_sweeps_equals_monolithic_in_partition_order() {
             &d,
             &partition,
             &mut l3,
+            &mut [],
             &mut v3,
             &mut s3,
             Some(ddm::CorrectionPass {

@@ -3,6 +3,28 @@
 //! A [`Profile`] is a sum of [`Term`]s; a [`Driver`] holds one optional profile per degree of
 //! freedom (vx, vy, vz, ωx, ωy, ωz in the world frame, ω about the centre of mass). A degree of
 //! freedom without a profile has zero velocity.
+//!
+//! # Force-limited drives
+//!
+//! By default a driven body is kinematic: it follows its program whatever force that takes
+//! (infinite mass). With `max_force` (N, per world axis) or `max_torque` (N·m) it is a machine
+//! with a relief valve: per degree of freedom d, the drive is a bilateral velocity constraint
+//! with a bounded impulse,
+//!
+//! ```text
+//! v_d = p_d(t) + s_d(t)   while |λ_d| < F_d h,   else λ_d = ±F_d h and v_d is free,
+//! ```
+//!
+//! solved in the same Gauss-Seidel sweeps as the contacts (see [`crate::solver::drive`]). The
+//! body then has its mass and inertia; `p` is the force-limited program and `s`
+//! (`superposed`) a velocity imposed on top of it whatever the force, such as a vibrator's
+//! stroke riding on a hydraulic cylinder. A degree of freedom left at `inf` keeps following
+//! its program exactly; with every limit infinite the body is the kinematic body, bit for bit.
+//!
+//! # Attached bodies
+//!
+//! `attached_to = N` makes a body a rigid part of body N (a tine's shaft on its blade): it
+//! has no program of its own, moves with N, and the impulses of its contacts act on N.
 
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
@@ -169,7 +191,7 @@ fn table_eval(times: &[f64], values: &[f64], t: f64) -> f64 {
 pub type Profile = Vec<Term>;
 
 /// Imposed velocity of a kinematic body: one optional profile per degree of freedom.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Driver {
     #[serde(default)]
@@ -188,6 +210,105 @@ pub struct Driver {
     /// inertia it was given, and keeps the velocity it had. `None`: driven for ever.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub release_at: Option<f64>,
+    /// Largest force (N) the drive exerts along the world x, y, z axes (`inf`: no limit).
+    #[serde(
+        default = "unlimited",
+        skip_serializing_if = "is_unlimited",
+        deserialize_with = "limits"
+    )]
+    pub max_force: [f64; 3],
+    /// Largest torque (N·m) the drive exerts about the world x, y, z axes (`inf`: no limit).
+    #[serde(
+        default = "unlimited",
+        skip_serializing_if = "is_unlimited",
+        deserialize_with = "limits"
+    )]
+    pub max_torque: [f64; 3],
+    /// Velocities imposed on top of the program whatever the force (a vibrator's stroke on a
+    /// force-limited cylinder); same degrees of freedom and terms as the program.
+    #[serde(default, skip_serializing_if = "Velocities::is_empty")]
+    pub superposed: Velocities,
+    /// Body this one is a rigid part of (see the module documentation).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub attached_to: Option<usize>,
+}
+
+impl Default for Driver {
+    /// No motion, no limit (a kinematic body at rest).
+    fn default() -> Self {
+        Driver {
+            vx: Profile::new(),
+            vy: Profile::new(),
+            vz: Profile::new(),
+            wx: Profile::new(),
+            wy: Profile::new(),
+            wz: Profile::new(),
+            release_at: None,
+            max_force: unlimited(),
+            max_torque: unlimited(),
+            superposed: Velocities::default(),
+            attached_to: None,
+        }
+    }
+}
+
+/// Velocity profiles of the six degrees of freedom (world frame, about the centre of mass).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Velocities {
+    #[serde(default)]
+    pub vx: Profile,
+    #[serde(default)]
+    pub vy: Profile,
+    #[serde(default)]
+    pub vz: Profile,
+    #[serde(default)]
+    pub wx: Profile,
+    #[serde(default)]
+    pub wy: Profile,
+    #[serde(default)]
+    pub wz: Profile,
+}
+
+impl Velocities {
+    fn dofs(&self) -> [(&'static str, &Profile); 6] {
+        [
+            ("vx", &self.vx),
+            ("vy", &self.vy),
+            ("vz", &self.vz),
+            ("wx", &self.wx),
+            ("wy", &self.wy),
+            ("wz", &self.wz),
+        ]
+    }
+
+    /// True when no degree of freedom has a term.
+    pub fn is_empty(&self) -> bool {
+        self.dofs().iter().all(|(_, p)| p.is_empty())
+    }
+
+    /// (linear, angular) velocity at time `t`.
+    pub fn at(&self, t: f64) -> (crate::math::DVec3, crate::math::DVec3) {
+        let e = |p: &Profile| p.iter().map(|term| term.eval(t)).sum::<f64>();
+        (
+            crate::math::DVec3::new(e(&self.vx), e(&self.vy), e(&self.vz)),
+            crate::math::DVec3::new(e(&self.wx), e(&self.wy), e(&self.wz)),
+        )
+    }
+}
+
+fn unlimited() -> [f64; 3] {
+    [f64::INFINITY; 3]
+}
+
+fn is_unlimited(l: &[f64; 3]) -> bool {
+    l.iter().all(|x| *x == f64::INFINITY)
+}
+
+/// Limits read from TOML (`inf` allowed) or JSON (where an infinite limit is written `null`).
+fn limits<'de, D: serde::Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
+    let v = <[Option<f64>; 3]>::deserialize(d)?;
+    Ok(v.map(|x| x.unwrap_or(f64::INFINITY)))
 }
 
 impl Driver {
@@ -202,13 +323,35 @@ impl Driver {
         ]
     }
 
-    /// Imposed (linear, angular) velocity at time `t`.
+    /// Commanded (linear, angular) velocity at time `t`: the program plus the superposed
+    /// velocities (what a kinematic body does).
     pub fn velocity(&self, t: f64) -> (crate::math::DVec3, crate::math::DVec3) {
         let e = |p: &Profile| p.iter().map(|term| term.eval(t)).sum::<f64>();
-        (
+        let (v, w) = (
             crate::math::DVec3::new(e(&self.vx), e(&self.vy), e(&self.vz)),
             crate::math::DVec3::new(e(&self.wx), e(&self.wy), e(&self.wz)),
-        )
+        );
+        if self.superposed.is_empty() {
+            return (v, w);
+        }
+        let (sv, sw) = self.superposed.at(t);
+        (v + sv, w + sw)
+    }
+
+    /// True when a translational limit is finite: the drive's translation is solved with
+    /// the contacts (the body has its mass), not imposed.
+    pub fn limits_translation(&self) -> bool {
+        !is_unlimited(&self.max_force)
+    }
+
+    /// True when a rotational limit is finite (the body has its inertia in the solver).
+    pub fn limits_rotation(&self) -> bool {
+        !is_unlimited(&self.max_torque)
+    }
+
+    /// True when some degree of freedom is force-limited.
+    pub fn is_force_limited(&self) -> bool {
+        self.limits_translation() || self.limits_rotation()
     }
 
     /// True when the body is free (dynamic) at time `t`.
@@ -223,9 +366,37 @@ impl Driver {
                 return Err(format!("release_at = {r} must be a finite time (s)"));
             }
         }
+        for (name, limits, unit) in [
+            ("max_force", self.max_force, "N"),
+            ("max_torque", self.max_torque, "N·m"),
+        ] {
+            if limits.iter().any(|&f| f.is_nan() || f < 0.0) {
+                return Err(format!(
+                    "{name} = {limits:?} must hold three values ≥ 0 {unit} (inf: no limit)"
+                ));
+            }
+        }
         for (name, p) in self.dofs() {
             for (k, term) in p.iter().enumerate() {
                 term.validate().map_err(|e| format!("{name}[{k}]: {e}"))?;
+            }
+        }
+        for (name, p) in self.superposed.dofs() {
+            for (k, term) in p.iter().enumerate() {
+                term.validate()
+                    .map_err(|e| format!("superposed.{name}[{k}]: {e}"))?;
+            }
+        }
+        if let Some(n) = self.attached_to {
+            let moves = self.dofs().iter().any(|(_, p)| !p.is_empty())
+                || !self.superposed.is_empty()
+                || self.is_force_limited()
+                || self.release_at.is_some();
+            if moves {
+                return Err(format!(
+                    "attached_to = {n}: an attached body moves with body {n} only (no \
+                     profiles, limits or release_at of its own)"
+                ));
             }
         }
         Ok(())

@@ -444,9 +444,24 @@ impl Scenario {
             finite3(&format!("{at}.angular_velocity"), v)?;
         }
         match (&b.driver, b.kind) {
-            (Some(d), BodyKind::Kinematic) => d
-                .validate()
-                .map_err(|e| ScenarioError(format!("{at}.driver.{e}")))?,
+            (Some(d), BodyKind::Kinematic) => {
+                d.validate()
+                    .map_err(|e| ScenarioError(format!("{at}.driver.{e}")))?;
+                if let Some(p) = d.attached_to {
+                    let parent_ok = self.bodies.get(p).is_some_and(|pb| {
+                        p != k
+                            && pb.kind == BodyKind::Kinematic
+                            && pb.driver.as_ref().is_none_or(|pd| pd.attached_to.is_none())
+                    });
+                    if !parent_ok {
+                        return err(format!(
+                            "{at}.driver.attached_to = {p} must be the index of another \
+                             kinematic [[body]] (0..{}) that is not attached itself",
+                            self.bodies.len()
+                        ));
+                    }
+                }
+            }
             (Some(_), kind) => {
                 return err(format!(
                     "{at}.driver is only allowed for kind = \"kinematic\" (got {kind:?})"
@@ -524,7 +539,11 @@ impl Scenario {
                         BodyKind::Dynamic => {
                             self.density(&format!("body[{k}]"), b.material.as_ref())?
                         }
-                        BodyKind::Kinematic if released => {
+                        // A released or force-limited driven body moves with its mass.
+                        BodyKind::Kinematic
+                            if released
+                                || b.driver.as_ref().is_some_and(|d| d.is_force_limited()) =>
+                        {
                             self.density(&format!("body[{k}]"), b.material.as_ref())?
                         }
                         _ => 1.0,

@@ -8,7 +8,10 @@
 //! 2. for j = 1 … n_DDM (`solver.max_iterations`):
 //!    1. `n` NLGS sweeps on every subdomain, in parallel (each owns a disjoint slice of bodies);
 //!    2. `m` NLGS sweeps on Γ;
-//!    3. error of each (the Quad sums of their last sweep, added in a fixed order) and the
+//!    3. the force-limited drives' rows ([`super::drive`]), on the calling thread: a driven
+//!       body belongs to the subdomain of its centre, and its contacts with other
+//!       subdomains' grains are in Γ, so its drive comes after both;
+//!    4. error of each (the Quad sums of their last sweep, added in a fixed order) and the
 //!       convergence test;
 //! 3. velocities back to the bodies (the update is done by the caller);
 //! 4. optionally ([`solve_and_correct`]), the overlap correction's sweeps on the same split.
@@ -22,6 +25,7 @@
 
 use super::correction::{self, CorrectionSettings, Overlap};
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
+use super::drive::{self, DriveRows};
 use super::nlgs::{Nlgs, SolveReport, SweepSums};
 use super::partition::{Balance, Partition, STATIC};
 use super::ConvergenceNorm;
@@ -499,8 +503,17 @@ pub fn solve(
     status: &mut [ContactStatus],
 ) -> (SolveReport, DdmTimes) {
     let mut ws = DdmWorkspace::default();
-    let (report, times, _) =
-        solve_and_correct(&mut ws, nlgs, ddm, partition, locals, bodies, status, None);
+    let (report, times, _) = solve_and_correct(
+        &mut ws,
+        nlgs,
+        ddm,
+        partition,
+        locals,
+        &mut [],
+        bodies,
+        status,
+        None,
+    );
     (report, times)
 }
 
@@ -526,6 +539,8 @@ pub struct DdmWorkspace {
     terms: Vec<f64>,
     /// Per caller contact: its bucket (in the equivalent order) and its place there.
     slot: Vec<(u32, u32)>,
+    /// The drives, bodies in solver numbering.
+    drives: Vec<DriveRows>,
 }
 
 /// [`solve`], then the overlap correction ([`super::correction`]) on the same subdomains and
@@ -540,6 +555,7 @@ pub fn solve_and_correct(
     ddm: &DdmSettings,
     partition: &Partition,
     locals: &mut [LocalProblem],
+    drives: &mut [DriveRows],
     bodies: &mut [SolverBody],
     status: &mut [ContactStatus],
     correction: Option<CorrectionPass>,
@@ -552,6 +568,7 @@ pub fn solve_and_correct(
         pv,
         terms,
         slot,
+        drives: dr,
     } = ws;
     pb.clear();
     pb.par_extend(partition.order.par_iter().map(|&i| bodies[i as usize]));
@@ -576,7 +593,12 @@ pub fn solve_and_correct(
                 }
             });
     }
-    let q2: f64 = terms.iter().fold(0.0, |s, &t| s + t);
+    dr.clear();
+    dr.extend(drives.iter().map(|d| DriveRows {
+        body: partition.new_index[d.body as usize],
+        ..*d
+    }));
+    let q2: f64 = terms.iter().fold(0.0, |s, &t| s + t) + drive::scale_sum(dr, pb.as_slice());
     let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
     // Where each caller contact lives, for the parallel write-back.
     slot.clear();
@@ -600,12 +622,12 @@ pub fn solve_and_correct(
 
     // 2. DDM iterations.
     let s = &nlgs.settings;
-    let total_contacts = locals.len();
-    if total_contacts == 0 {
+    let total_rows = locals.len() + dr.len();
+    if total_rows == 0 {
         report.converged = true;
     }
     for j in 1..=s.max_iterations {
-        if total_contacts == 0 {
+        if total_rows == 0 {
             break;
         }
         let t = Instant::now();
@@ -624,17 +646,19 @@ pub fn solve_and_correct(
                 nlgs.sweep(&mut b.locals, v, &mut b.status)
             });
         }
+        let drive_sums = drive::sweep(dr, pb.as_mut_slice());
         times.interface += t.elapsed().as_secs_f64();
         let mut sums = SweepSums::default();
         for x in sub_sums.into_iter().chain(gamma_sums) {
             sums += x;
         }
+        sums += drive_sums;
         report.iterations = j;
         report.quad = sums.quad();
         if j % s.check_every == 0 || j == s.max_iterations {
             let measure = match s.norm {
                 ConvergenceNorm::Quad => report.quad,
-                ConvergenceNorm::NaturalMap => residual(nlgs, p, pb, q),
+                ConvergenceNorm::NaturalMap => residual(nlgs, p, dr, pb, q),
             };
             if measure <= s.tolerance {
                 report.converged = true;
@@ -642,7 +666,11 @@ pub fn solve_and_correct(
             }
         }
     }
-    report.residual = residual(nlgs, p, pb, q);
+    report.residual = residual(nlgs, p, dr, pb, q);
+    for (d, w) in drives.iter_mut().zip(dr.iter()) {
+        d.impulse_v = w.impulse_v;
+        d.impulse_w = w.impulse_w;
+    }
 
     // 3. Back to the caller's numbering, in parallel over the caller's bodies and contacts.
     let (new_index, pb_ref) = (&partition.new_index, pb.as_slice());
@@ -719,9 +747,9 @@ fn correct(
     found
 }
 
-/// Relative natural-map residual over all contacts: each bucket's sum in parallel, the sums
-/// added in the equivalent order.
-fn residual(nlgs: &Nlgs, p: &DdmProblem, pb: &[SolverBody], q: f64) -> f64 {
+/// Relative natural-map residual over all contacts and drives: each bucket's sum in parallel,
+/// the sums added in the equivalent order, the drives' last.
+fn residual(nlgs: &Nlgs, p: &DdmProblem, dr: &[DriveRows], pb: &[SolverBody], q: f64) -> f64 {
     let buckets: Vec<&Bucket> = p.buckets().collect();
     let sums: Vec<f64> = buckets
         .par_iter()
@@ -731,6 +759,7 @@ fn residual(nlgs: &Nlgs, p: &DdmProblem, pb: &[SolverBody], q: f64) -> f64 {
     for s in sums {
         sum += s;
     }
+    sum += drive::residual_sum(dr, pb);
     sum.sqrt() / q
 }
 

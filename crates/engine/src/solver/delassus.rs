@@ -66,6 +66,15 @@ impl BodyAccess for [SolverBody] {
     }
 }
 
+impl SolverBody {
+    /// Whether impulses change this body's velocities (a dynamic body, or a force-limited
+    /// driven one).
+    #[inline]
+    pub fn writable(&self) -> bool {
+        self.inv_mass > 0.0 || self.inv_inertia != DMat3::ZERO
+    }
+}
+
 impl LocalProblem {
     /// The local frame `[n, t, s = n × t]`.
     #[inline(always)]
@@ -119,10 +128,14 @@ pub fn delassus_block(
 }
 
 /// Builds the local problem of every contact (in parallel; the order is the contacts' order).
+/// `attach[i]` is the body whose velocities body `i` takes (itself, or the body it is a rigid
+/// part of; empty: every body is itself): a contact on an attached part acts on that body,
+/// with the lever arm from its centre of mass.
 pub fn build_local_problems(
     contacts: &ContactSet,
     bodies: &BodySet,
     solver_bodies: &[SolverBody],
+    attach: &[u32],
     out: &mut Vec<LocalProblem>,
 ) {
     use rayon::prelude::*;
@@ -131,7 +144,10 @@ pub fn build_local_problems(
         .into_par_iter()
         .with_min_len(256)
         .map(|k| {
-            let (b1, b2) = (contacts.body1[k] as usize, contacts.body2[k] as usize);
+            let (mut b1, mut b2) = (contacts.body1[k] as usize, contacts.body2[k] as usize);
+            if !attach.is_empty() {
+                (b1, b2) = (attach[b1] as usize, attach[b2] as usize);
+            }
             // The frame as the sweep rebuilds it from `[n, t]`.
             let [n, t, _] = contacts.frame[k];
             let e = [n, t, n.cross(t)];
@@ -147,8 +163,8 @@ pub fn build_local_problems(
             LocalProblem {
                 body1: b1 as u32,
                 body2: b2 as u32,
-                dynamic1: solver_bodies[b1].inv_mass > 0.0,
-                dynamic2: solver_bodies[b2].inv_mass > 0.0,
+                dynamic1: solver_bodies[b1].writable(),
+                dynamic2: solver_bodies[b2].writable(),
                 frame: [n, t],
                 r1,
                 r2,

@@ -14,12 +14,14 @@
 pub mod correction;
 pub mod ddm;
 pub mod delassus;
+pub mod drive;
 pub mod nlgs;
 pub mod partition;
 
 pub use correction::CorrectionSettings;
 pub use ddm::DdmSettings;
 pub use delassus::{LocalProblem, SolverBody};
+pub use drive::DriveRows;
 pub use nlgs::{Nlgs, SolveReport};
 pub use partition::{Balance, Partition};
 

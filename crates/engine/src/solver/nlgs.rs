@@ -15,6 +15,7 @@
 //! 4. Report iterations, the final Quad norm and natural-map residual, and convergence.
 
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
+use super::drive::{self, DriveRows};
 use super::{ConvergenceNorm, SolverSettings};
 use crate::laws::coulomb::{natural_map_residual, solve_local_from};
 use crate::laws::ContactStatus;
@@ -166,24 +167,37 @@ impl Nlgs {
         v: &mut [SolverBody],
         status: &mut [ContactStatus],
     ) -> SolveReport {
+        self.solve_with_drives(locals, &mut [], v, status)
+    }
+
+    /// [`Nlgs::solve`] with force-limited drives: each sweep runs the contacts in order, then
+    /// the drives' rows ([`super::drive`]). The drive impulses are left in `drives`.
+    pub fn solve_with_drives(
+        &self,
+        locals: &mut [LocalProblem],
+        drives: &mut [DriveRows],
+        v: &mut [SolverBody],
+        status: &mut [ContactStatus],
+    ) -> SolveReport {
         // 1. Scale of the residual: free local velocities.
-        let q2 = self.free_scale2(locals, v);
+        let q2 = self.free_scale2(locals, v) + drive::scale_sum(drives, v);
         let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
         self.warm_start(locals, v);
         let mut report = SolveReport::default();
-        if locals.is_empty() {
+        if locals.is_empty() && drives.is_empty() {
             report.converged = true;
             return report;
         }
         let s = &self.settings;
         for k in 1..=s.max_iterations {
-            let sums = self.sweep(locals, v, status);
+            let mut sums = self.sweep(locals, v, status);
+            sums += drive::sweep(drives, v);
             report.iterations = k;
             report.quad = sums.quad();
             if k % s.check_every == 0 || k == s.max_iterations {
                 let measure = match s.norm {
                     ConvergenceNorm::Quad => report.quad,
-                    ConvergenceNorm::NaturalMap => self.natural_residual(locals, v, q),
+                    ConvergenceNorm::NaturalMap => self.natural_residual(locals, drives, v, q),
                 };
                 if measure <= s.tolerance {
                     report.converged = true;
@@ -191,16 +205,19 @@ impl Nlgs {
                 }
             }
         }
-        report.residual = self.natural_residual(locals, v, q);
+        report.residual = self.natural_residual(locals, drives, v, q);
         report
     }
 
-    /// Relative natural-map residual of the whole problem.
-    pub fn natural_residual(&self, locals: &[LocalProblem], v: &[SolverBody], q: f64) -> f64 {
-        locals
-            .iter()
-            .map(|c| self.residual2(c, v))
-            .sum::<f64>()
+    /// Relative natural-map residual of the whole problem (contacts and drives).
+    pub fn natural_residual(
+        &self,
+        locals: &[LocalProblem],
+        drives: &[DriveRows],
+        v: &[SolverBody],
+        q: f64,
+    ) -> f64 {
+        (locals.iter().map(|c| self.residual2(c, v)).sum::<f64>() + drive::residual_sum(drives, v))
             .sqrt()
             / q
     }
