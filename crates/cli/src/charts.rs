@@ -423,6 +423,18 @@ fn tick_label(v: f64, lo: f64, hi: f64) -> String {
     format!("{v}")
 }
 
+/// A bar's total, to 4 significant digits.
+fn total_label(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        "0".into()
+    } else if (1e-3..1e5).contains(&v.abs()) {
+        let d = (3 - v.abs().log10().floor() as i32).max(0) as usize;
+        format!("{v:.d$}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
 /// `10` with exponent `e` in superscript digits: `10⁻⁴`.
 fn pow10_label(e: i32) -> String {
     const SUP: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
@@ -930,7 +942,7 @@ fn draw_bars<DB: DrawingBackend>(area: &Area<DB>, b: &BarChart, s: f64) -> io::R
                 .draw_series([
                     Rectangle::new([(l, 0.0), (r, acc)], BLACK.stroke_width(px(1.0, s))).into_dyn(),
                     Text::new(
-                        tick_label(totals[k], 0.0, max_total),
+                        total_label(totals[k]),
                         (0.5 * (l + r), acc + 0.015 * y1),
                         font(TICK_LABEL, s).pos(Pos::new(HPos::Center, VPos::Bottom)),
                     )

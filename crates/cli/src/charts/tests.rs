@@ -351,6 +351,9 @@ fn tick_labels_and_helpers() {
     assert_eq!(tick_label(2.5e-4, 0.0, 5e-4), "2.5e-4");
     assert_eq!(tick_label(2e6, 0.0, 5e6), "2e6");
     assert_eq!(tick_label(1250.0, 0.0, 2500.0), "1250");
+    assert_eq!(total_label(7.48846), "7.488");
+    assert_eq!(total_label(1234.5), "1234");
+    assert_eq!(total_label(2.5e-5), "2.500e-5");
     assert_eq!(pow10_label(-4), "10⁻⁴");
     assert_eq!(pow10_label(12), "10¹²");
     assert_eq!(pow10_label(0), "10⁰");
