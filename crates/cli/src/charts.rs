@@ -423,8 +423,8 @@ fn tick_label(v: f64, lo: f64, hi: f64) -> String {
     format!("{v}")
 }
 
-/// A bar's total, to 4 significant digits.
-fn total_label(v: f64) -> String {
+/// `v` to 4 significant digits (a bar's total, a colour bar's tick).
+fn sig4(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         "0".into()
     } else if (1e-3..1e5).contains(&v.abs()) {
@@ -942,7 +942,7 @@ fn draw_bars<DB: DrawingBackend>(area: &Area<DB>, b: &BarChart, s: f64) -> io::R
                 .draw_series([
                     Rectangle::new([(l, 0.0), (r, acc)], BLACK.stroke_width(px(1.0, s))).into_dyn(),
                     Text::new(
-                        total_label(totals[k]),
+                        sig4(totals[k]),
                         (0.5 * (l + r), acc + 0.015 * y1),
                         font(TICK_LABEL, s).pos(Pos::new(HPos::Center, VPos::Bottom)),
                     )
@@ -1016,8 +1016,13 @@ fn draw_map<DB: DrawingBackend>(area: &Area<DB>, m: &ScatterMap, s: f64) -> io::
         .copied()
         .filter(|p| p.0.is_finite() && p.1.is_finite() && p.2.is_finite())
         .collect();
-    let (x0, x1) = span(pts.iter().map(|p| p.0)).map_or((0.0, 1.0), |(a, b)| sanitize_range(a, b));
-    let (y0, y1) = span(pts.iter().map(|p| p.1)).map_or((0.0, 1.0), |(a, b)| sanitize_range(a, b));
+    // A little room so that no point sits on the frame.
+    let padded = |(a, b): (f64, f64)| {
+        let (a, b) = sanitize_range(a, b);
+        (a - 0.04 * (b - a), b + 0.04 * (b - a))
+    };
+    let (x0, x1) = span(pts.iter().map(|p| p.0)).map_or((0.0, 1.0), padded);
+    let (y0, y1) = span(pts.iter().map(|p| p.1)).map_or((0.0, 1.0), padded);
     let (v0, v1) = m
         .value_range
         .or_else(|| span(pts.iter().map(|p| p.2)))
@@ -1080,7 +1085,7 @@ fn draw_map<DB: DrawingBackend>(area: &Area<DB>, m: &ScatterMap, s: f64) -> io::
         let y = bottom - ((bottom - top) as f64 * f64::from(k) / 4.0).round() as i32;
         bar_area
             .draw(&Text::new(
-                tick_label(v, v0, v1),
+                sig4(v),
                 (bx1 + px(10.0, s) as i32, y),
                 font(TICK_LABEL, s).pos(Pos::new(HPos::Left, VPos::Center)),
             ))
@@ -1091,7 +1096,7 @@ fn draw_map<DB: DrawingBackend>(area: &Area<DB>, m: &ScatterMap, s: f64) -> io::
             m.value_label.clone(),
             (bar_w as i32 - px(MARGIN, s) as i32, (top + bottom) / 2),
             font(AXIS_LABEL, s)
-                .transform(FontTransform::Rotate90)
+                .transform(FontTransform::Rotate270)
                 .pos(Pos::new(HPos::Center, VPos::Top)),
         ))
         .map_err(err)?;

@@ -8,6 +8,13 @@ fn scratch(name: &str) -> PathBuf {
     d
 }
 
+/// Removes a test folder, unless `BALLAST_KEEP_REPORT` is set (to look at the figures).
+fn cleanup(dir: &Path) {
+    if std::env::var_os("BALLAST_KEEP_REPORT").is_none() {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
 /// Checks of a written figure, shared with the report's tests.
 pub(crate) mod check {
     use std::path::Path;
@@ -138,8 +145,8 @@ fn line_chart_is_written_twice_with_its_labels() {
         assert!(!n.contains(".tmp"), "left over {n}");
     }
     assert!(write_figure(&dir.join("missing/dir"), "x", &Figure::Panels(vec![])).is_err());
-    let _ = std::fs::remove_dir_all(&dir);
-    let _ = std::fs::remove_dir_all(&again);
+    cleanup(&dir);
+    cleanup(&again);
 }
 
 #[test]
@@ -271,7 +278,7 @@ fn degenerate_data_gives_readable_figures() {
         }
     }
     write_figure(&dir, "none", &Figure::Panels(vec![])).unwrap();
-    let _ = std::fs::remove_dir_all(&dir);
+    cleanup(&dir);
 }
 
 #[test]
@@ -339,7 +346,7 @@ fn stacked_bars_and_maps_are_written() {
     };
     write_figure(&dir, "map_empty", &Figure::Map(empty)).unwrap();
     check::figure(&dir, "map_empty", &["Compacity in a section"]);
-    let _ = std::fs::remove_dir_all(&dir);
+    cleanup(&dir);
 }
 
 #[test]
@@ -351,9 +358,9 @@ fn tick_labels_and_helpers() {
     assert_eq!(tick_label(2.5e-4, 0.0, 5e-4), "2.5e-4");
     assert_eq!(tick_label(2e6, 0.0, 5e6), "2e6");
     assert_eq!(tick_label(1250.0, 0.0, 2500.0), "1250");
-    assert_eq!(total_label(7.48846), "7.488");
-    assert_eq!(total_label(1234.5), "1234");
-    assert_eq!(total_label(2.5e-5), "2.500e-5");
+    assert_eq!(sig4(7.48846), "7.488");
+    assert_eq!(sig4(1234.5), "1234");
+    assert_eq!(sig4(2.5e-5), "2.500e-5");
     assert_eq!(pow10_label(-4), "10⁻⁴");
     assert_eq!(pow10_label(12), "10¹²");
     assert_eq!(pow10_label(0), "10⁰");
