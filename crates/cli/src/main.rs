@@ -1,6 +1,7 @@
 //! `ballast`: run contact-dynamics scenarios and benchmarks.
 
 mod bench;
+mod charts;
 mod progress;
 mod report;
 mod run;

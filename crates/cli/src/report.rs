@@ -1,31 +1,22 @@
-//! Run report and scaling plots, drawn by the run itself (PNG via `ballast_plot`, no Python).
+//! Run report and scaling plots, drawn by the run itself (see [`crate::charts`], no Python).
 //!
-//! * [`write_run_report`]: after `ballast run`, `DIR/plots/*.png` from `DIR/series.csv` and
-//!   `DIR/report.md` with the scenario, the Table-1-style timing table, the final indicators
-//!   and the plots: what a user forwards to a colleague.
+//! * [`write_run_report`]: after `ballast run`, `DIR/plots/NAME.svg` and `DIR/plots/NAME.png`
+//!   from `DIR/series.csv` and `DIR/report.md` with the scenario, the Table-1-style timing
+//!   table, the final indicators and the plots: what a user forwards to a colleague.
 //! * [`write_scaling_plots`]: after `ballast bench --scaling`, speedup and efficiency versus
 //!   threads (the paper's Fig. 4) and the time per phase (its Table 1) as stacked bars.
 //!
 //! Every file is written atomically (temporary file, then rename), so an interrupted run
 //! never leaves a half-written report or image.
 
-use ballast_plot::{
-    render_png, render_png_stack, render_stacked_bars, BarChart, Chart, Series, Style,
-};
+use crate::charts::{write_figure, BarChart, Figure, LineChart, Series, Style, REFERENCE};
 use serde_json::Value;
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::Path;
 
-/// Image size of one chart, in pixels.
-const W: u32 = 960;
-const H: u32 = 600;
-/// Height of one panel of a stacked (multi-panel) image.
-const PANEL_H: u32 = 400;
-/// The per-phase bar of a run, shown under the timing table.
-const PHASES_PNG: &str = "phases.png";
-/// Grey of reference curves (ideal speedup, tolerance).
-const REFERENCE: [u8; 3] = [120, 120, 120];
+/// The per-phase bar of a run (figure name), shown under the timing table.
+const PHASES_FIG: &str = "phases";
 /// Segments of the per-phase bars, in stacking order (Table 1's columns).
 const PHASES: [&str; 4] = ["detection", "NLGS subdomains", "NLGS interface", "other"];
 
@@ -92,7 +83,7 @@ impl Table {
 struct Family {
     /// Column-name prefix.
     prefix: &'static str,
-    /// Image file name.
+    /// Figure name (`NAME.svg`, `NAME.png`).
     file: &'static str,
     title: &'static str,
     /// Quantity for the y label, and what a numbered column is called in the legend.
@@ -105,7 +96,7 @@ struct Family {
 const FAMILIES: [Family; 4] = [
     Family {
         prefix: "compacity_",
-        file: "compacity.png",
+        file: "compacity",
         title: "Compacity per control volume",
         quantity: "compacity",
         noun: "CV",
@@ -113,7 +104,7 @@ const FAMILIES: [Family; 4] = [
     },
     Family {
         prefix: "tine_force_",
-        file: "tines.png",
+        file: "tines",
         title: "Tine forces",
         quantity: "tine force",
         noun: "tine",
@@ -121,7 +112,7 @@ const FAMILIES: [Family; 4] = [
     },
     Family {
         prefix: "block_z_",
-        file: "blocks.png",
+        file: "blocks",
         title: "Block position",
         quantity: "block height z",
         noun: "block",
@@ -129,7 +120,7 @@ const FAMILIES: [Family; 4] = [
     },
     Family {
         prefix: "coordination",
-        file: "coordination.png",
+        file: "coordination",
         title: "Coordination number",
         quantity: "contacts per grain",
         noun: "mean",
@@ -220,7 +211,7 @@ fn fence_for(text: &str) -> String {
     "`".repeat(longest.max(2) + 1)
 }
 
-/// Plots rendered so far: `(file, caption)` for the report, and failures.
+/// Figures written so far: `(name, caption)` for the report, and failures.
 #[derive(Default)]
 struct Plots {
     made: Vec<(String, String)>,
@@ -228,16 +219,22 @@ struct Plots {
 }
 
 impl Plots {
-    fn keep(&mut self, file: &str, caption: &str, r: std::io::Result<()>) {
-        match r {
-            Ok(()) => self.made.push((file.into(), caption.into())),
-            Err(e) => self.errors.push(format!("{file}: {e}")),
+    /// Writes `fig` as `dir/NAME.svg` and `dir/NAME.png` and records it (or its failure).
+    fn write(&mut self, dir: &Path, name: &str, caption: &str, fig: &Figure) {
+        match write_figure(dir, name, fig) {
+            Ok(()) => self.made.push((name.into(), caption.into())),
+            Err(e) => self.errors.push(format!("{name}: {e}")),
         }
     }
 }
 
-fn chart(title: &str, x_label: &str, y_label: &str, series: Vec<Series>) -> Chart {
-    Chart {
+/// The markdown of figure `name`: the PNG, and a link to its SVG.
+fn figure_markdown(name: &str, caption: &str) -> String {
+    format!("![{caption}](plots/{name}.png)\n\n[{caption} (SVG)](plots/{name}.svg)\n")
+}
+
+fn chart(title: &str, x_label: &str, y_label: &str, series: Vec<Series>) -> LineChart {
+    LineChart {
         title: title.into(),
         x_label: x_label.into(),
         y_label: y_label.into(),
@@ -311,11 +308,11 @@ fn run_plots(dir: &Path, t: &Table, summary: &Value) -> Plots {
         for ch in &mut panels {
             ch.x_range = span;
         }
-        let r = render_png_stack(&panels, W, PANEL_H, &dir.join("solver.png"));
-        p.keep(
-            "solver.png",
+        p.write(
+            dir,
+            "solver",
             "Contact points, NLGS iterations and residual versus time",
-            r,
+            &Figure::Panels(panels),
         );
     }
 
@@ -328,10 +325,11 @@ fn run_plots(dir: &Path, t: &Table, summary: &Value) -> Plots {
         );
         // Settling spans decades: a log axis shows the tail.
         ch.log_y = decades(t, c) > 3.0;
-        p.keep(
-            "energy.png",
+        p.write(
+            dir,
+            "energy",
             "Kinetic energy versus time",
-            render_png(&ch, W, H, &dir.join("energy.png")),
+            &Figure::chart(ch),
         );
     }
 
@@ -342,10 +340,11 @@ fn run_plots(dir: &Path, t: &Table, summary: &Value) -> Plots {
             "max interpenetration (mm)",
             vec![line("max interpenetration", c, 1e3)],
         );
-        p.keep(
-            "penetration.png",
+        p.write(
+            dir,
+            "penetration",
             "Largest interpenetration versus time",
-            render_png(&ch, W, H, &dir.join("penetration.png")),
+            &Figure::chart(ch),
         );
     }
 
@@ -366,10 +365,11 @@ fn run_plots(dir: &Path, t: &Table, summary: &Value) -> Plots {
             "time per step (ms)",
             phases,
         );
-        p.keep(
-            "timings.png",
+        p.write(
+            dir,
+            "timings",
             "Time per step of each phase versus time",
-            render_png(&ch, W, H, &dir.join("timings.png")),
+            &Figure::chart(ch),
         );
     }
 
@@ -393,10 +393,11 @@ fn run_plots(dir: &Path, t: &Table, summary: &Value) -> Plots {
             &format!("{} ({shown})", f.quantity),
             series,
         );
-        p.keep(
+        p.write(
+            dir,
             f.file,
             &format!("{} versus time", f.title),
-            render_png(&ch, W, H, &dir.join(f.file)),
+            &Figure::chart(ch),
         );
     }
     p
@@ -456,7 +457,7 @@ fn phase_segments(summary: &Value) -> [f64; 4] {
     ]
 }
 
-/// Writes `out/plots/*.png` from `out/series.csv` and `out/report.md`: scenario file name,
+/// Writes `out/plots/*.{svg,png}` from `out/series.csv` and `out/report.md`: scenario file name,
 /// parameters (the scenario TOML), the Table-1-style timing table from
 /// `summary["timings_s"]`, the solver, contact and energy indicators of `summary`, the last
 /// values of the per-object columns (compacity, tine forces, block heights), and the plots.
@@ -483,8 +484,7 @@ pub fn write_run_report(
     };
     let breakdown = BarChart {
         title: "Time per phase (Table 1)".into(),
-        x_label: String::new(),
-        y_label: "time (s)".into(),
+        y_label: "wall-clock time (s)".into(),
         categories: vec![format!(
             "this run\n{} thread(s), {}",
             summary.get("threads").and_then(Value::as_u64).unwrap_or(0),
@@ -496,8 +496,12 @@ pub fn write_run_report(
         segments: PHASES.iter().map(|s| s.to_string()).collect(),
         values: vec![phase_segments(summary).to_vec()],
     };
-    let r = render_stacked_bars(&breakdown, W, H, &plots_dir.join(PHASES_PNG));
-    plots.keep(PHASES_PNG, "Time per phase (Table 1)", r);
+    plots.write(
+        &plots_dir,
+        PHASES_FIG,
+        "Time per phase (Table 1)",
+        &Figure::Bars(breakdown),
+    );
 
     let md = report_markdown(
         scenario_file,
@@ -572,8 +576,8 @@ fn report_markdown(
         "\nWall-clock seconds over the whole run. `subdomains` and `interface` are parts of \
          `nlgs` and are 0 for monolithic NLGS (subdomains 1x1x1).\n"
     );
-    if let Some((file, caption)) = plots.made.iter().find(|(f, _)| f == PHASES_PNG) {
-        let _ = writeln!(s, "![{caption}](plots/{file})\n");
+    if let Some((name, caption)) = plots.made.iter().find(|(f, _)| f == PHASES_FIG) {
+        let _ = writeln!(s, "{}", figure_markdown(name, caption));
     }
 
     let _ = writeln!(s, "## Results\n");
@@ -640,8 +644,8 @@ fn report_markdown(
     if table.is_none() {
         let _ = writeln!(s, "No `series.csv` in the output folder: no time plots.\n");
     }
-    for (file, caption) in plots.made.iter().filter(|(f, _)| f != PHASES_PNG) {
-        let _ = writeln!(s, "### {caption}\n\n![{caption}](plots/{file})\n");
+    for (name, caption) in plots.made.iter().filter(|(f, _)| f != PHASES_FIG) {
+        let _ = writeln!(s, "### {caption}\n\n{}", figure_markdown(name, caption));
     }
     for e in &plots.errors {
         let _ = writeln!(s, "Plot not drawn: {e}\n");
@@ -649,10 +653,10 @@ fn report_markdown(
     s
 }
 
-/// Writes the scaling plots into `out_dir` (created): `speedup.png` (speedup versus threads
-/// per configuration, with the ideal line: the paper's Fig. 4), `efficiency.png` (parallel
-/// efficiency in %), and `timings.png` (time per phase, one stacked bar per configuration
-/// and thread count: the paper's Table 1). Configurations keep their order of first
+/// Writes the scaling plots into `out_dir` (created), each as `NAME.svg` and `NAME.png`:
+/// `speedup` (speedup versus threads per configuration, with the ideal line: the paper's
+/// Fig. 4), `efficiency` (parallel efficiency in %), and `timings` (time per phase, one
+/// stacked bar per configuration and thread count: the paper's Table 1). Configurations keep their order of first
 /// appearance in `cases`.
 pub fn write_scaling_plots(out_dir: &Path, cases: &[ScalingPoint]) -> Result<(), String> {
     std::fs::create_dir_all(out_dir)
@@ -686,8 +690,10 @@ pub fn write_scaling_plots(out_dir: &Path, cases: &[ScalingPoint]) -> Result<(),
         )
         .with_color(REFERENCE)
     };
-    let err =
-        |f: &str, e: std::io::Error| format!("cannot write {}: {e}", out_dir.join(f).display());
+    let write = |name: &str, fig: Figure| {
+        write_figure(out_dir, name, &fig)
+            .map_err(|e| format!("cannot write {}: {e}", out_dir.join(name).display()))
+    };
 
     let mut series = per_config(&|c| c.2);
     series.push(ideal(&|p| p));
@@ -701,7 +707,7 @@ pub fn write_scaling_plots(out_dir: &Path, cases: &[ScalingPoint]) -> Result<(),
     // From 0, and above the ideal line so it does not hide under the frame.
     let top = cases.iter().map(|c| c.2).fold(max_threads, f64::max);
     speedup.y_range = Some((0.0, top * 1.05));
-    render_png(&speedup, W, H, &out_dir.join("speedup.png")).map_err(|e| err("speedup.png", e))?;
+    write("speedup", Figure::chart(speedup))?;
 
     let mut series = per_config(&|c| 100.0 * c.3);
     series.push(ideal(&|_| 100.0));
@@ -714,13 +720,11 @@ pub fn write_scaling_plots(out_dir: &Path, cases: &[ScalingPoint]) -> Result<(),
     efficiency.x_range = Some((0.0, max_threads));
     let top = cases.iter().map(|c| 100.0 * c.3).fold(100.0, f64::max);
     efficiency.y_range = Some((0.0, top * 1.05));
-    render_png(&efficiency, W, H, &out_dir.join("efficiency.png"))
-        .map_err(|e| err("efficiency.png", e))?;
+    write("efficiency", Figure::chart(efficiency))?;
 
     let bars = BarChart {
         title: "Time per phase (Table 1)".into(),
-        x_label: String::new(),
-        y_label: "time over the timed steps (s)".into(),
+        y_label: "wall-clock time over the timed steps (s)".into(),
         categories: cases
             .iter()
             .map(|c| format!("{}\n{} thr.", c.0, c.1))
@@ -728,14 +732,7 @@ pub fn write_scaling_plots(out_dir: &Path, cases: &[ScalingPoint]) -> Result<(),
         segments: PHASES.iter().map(|s| s.to_string()).collect(),
         values: cases.iter().map(|c| c.4.to_vec()).collect(),
     };
-    render_stacked_bars(
-        &bars,
-        W.max(120 * cases.len() as u32).min(4096),
-        H,
-        &out_dir.join("timings.png"),
-    )
-    .map_err(|e| err("timings.png", e))?;
-    Ok(())
+    write("timings", Figure::Bars(bars))
 }
 
 #[cfg(test)]
@@ -806,12 +803,7 @@ mod tests {
         std::fs::write(dir.join("series.csv"), s).unwrap();
     }
 
-    fn decodes(path: &Path) {
-        let img =
-            ballast_plot::decode_png(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-        assert!(img.width >= 400 && img.height >= 300);
-        assert!(img.distinct_colors() >= 5, "{}", path.display());
-    }
+    use crate::charts::tests::check;
 
     #[test]
     fn run_report_has_table_plots_and_indicators() {
@@ -858,20 +850,42 @@ mod tests {
         ] {
             assert!(md.contains(needle), "missing {needle:?} in\n{md}");
         }
-        for png in [
-            "solver.png",
-            "energy.png",
-            "penetration.png",
-            "timings.png",
-            "phases.png",
-            "compacity.png",
-            "tines.png",
-            "blocks.png",
-            "coordination.png",
+        // Every figure in both formats, shown (PNG) and linked (SVG), with its axis labels.
+        for (name, labels) in [
+            (
+                "solver",
+                &["time (s)", "contacts (-)", "iterations (-)", "residual (-)"][..],
+            ),
+            ("energy", &["time (s)", "kinetic energy (J)"]),
+            ("penetration", &["time (s)", "max interpenetration (mm)"]),
+            ("timings", &["time (s)", "time per step (ms)", "nlgs"]),
+            ("phases", &["wall-clock time (s)", "other"]),
+            ("compacity", &["time (s)", "compacity (-)", "crib left"]),
+            ("tines", &["time (s)", "tine force (kN)"]),
+            ("blocks", &["time (s)", "block height z (mm)"]),
+            ("coordination", &["time (s)", "contacts per grain (-)"]),
         ] {
-            assert!(md.contains(&format!("](plots/{png})")), "no link to {png}");
-            decodes(&dir.join("plots").join(png));
+            for ext in ["png", "svg"] {
+                assert!(
+                    md.contains(&format!("](plots/{name}.{ext})")),
+                    "no link to {name}.{ext}"
+                );
+            }
+            check::figure(&dir.join("plots"), name, labels);
         }
+        // Same data, same figures, byte for byte.
+        let again = scratch("run-again");
+        std::fs::copy(dir.join("series.csv"), again.join("series.csv")).unwrap();
+        write_run_report(&again, Path::new("t.toml"), "", &summary()).unwrap();
+        for e in std::fs::read_dir(dir.join("plots")).unwrap() {
+            let n = e.unwrap().file_name();
+            let (a, b) = (dir.join("plots").join(&n), again.join("plots").join(&n));
+            assert!(
+                std::fs::read(a).unwrap() == std::fs::read(b).unwrap(),
+                "{n:?}"
+            );
+        }
+        cleanup(&again);
         // Nothing temporary left behind.
         for d in [dir.clone(), dir.join("plots")] {
             for e in std::fs::read_dir(d).unwrap() {
@@ -889,8 +903,9 @@ mod tests {
         write_run_report(&dir, Path::new("a.toml"), "", &json!({})).unwrap();
         let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
         assert!(md.contains("| detection | n/a | n/a | n/a |"));
-        assert!(md.contains("](plots/solver.png)"));
+        assert!(md.contains("](plots/solver.png)") && md.contains("](plots/solver.svg)"));
         assert!(!md.contains("compacity.png") && !dir.join("plots/compacity.png").exists());
+        assert!(!dir.join("plots/compacity.svg").exists());
 
         std::fs::remove_file(dir.join("series.csv")).unwrap();
         write_run_report(&dir, Path::new("a.toml"), "x = 1", &summary()).unwrap();
@@ -918,10 +933,34 @@ mod tests {
             }
         }
         write_scaling_plots(&dir.join("plots"), &cases).unwrap();
-        for png in ["speedup.png", "efficiency.png", "timings.png"] {
-            decodes(&dir.join("plots").join(png));
-        }
+        let plots = dir.join("plots");
+        check::figure(
+            &plots,
+            "speedup",
+            &["threads", "speedup T1/Tp (-)", "ideal", "NLGS"],
+        );
+        check::figure(
+            &plots,
+            "efficiency",
+            &["threads", "efficiency speedup/threads (%)"],
+        );
+        check::figure(
+            &plots,
+            "timings",
+            &[
+                "wall-clock time over the timed steps (s)",
+                "DDM 2x2x1",
+                "4 thr.",
+            ],
+        );
         write_scaling_plots(&dir.join("empty"), &[]).unwrap();
+        for name in ["speedup", "efficiency", "timings"] {
+            check::figure(
+                &dir.join("empty"),
+                name,
+                &["threads"][..usize::from(name != "timings")],
+            );
+        }
         cleanup(&dir);
     }
 

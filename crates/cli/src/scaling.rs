@@ -225,7 +225,7 @@ pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
         }
     }
     if let Some(path) = json {
-        // Plots next to the JSON: FILE_plots/{speedup,efficiency,timings}.png.
+        // Plots next to the JSON: FILE_plots/{speedup,efficiency,timings}.{svg,png}.
         let stem = path
             .file_stem()
             .map_or("scaling".into(), |s| s.to_string_lossy().to_string());

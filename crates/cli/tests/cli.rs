@@ -3,6 +3,8 @@
 use std::path::PathBuf;
 use std::process::Command;
 
+mod figures;
+
 fn ballast() -> Command {
     Command::new(env!("CARGO_BIN_EXE_ballast"))
 }
@@ -89,6 +91,36 @@ fn run_writes_summary_and_series_and_is_reproducible() {
     let lines: Vec<&str> = csv.lines().collect();
     assert!(lines[0].starts_with("step,time_s,contacts,iterations"));
     assert_eq!(lines.len(), 1 + 2, "rows at steps 50 and 60");
+    // The report's figures, each as PNG (shown) and SVG (linked), with their axis labels; the
+    // same bytes for both runs but where they show wall-clock times.
+    let md = std::fs::read_to_string(a.join("report.md")).unwrap();
+    let x = "time (s)";
+    for (name, labels) in [
+        (
+            "solver",
+            &[x, "contacts (-)", "iterations (-)", "residual (-)"][..],
+        ),
+        ("energy", &[x, "kinetic energy (J)"]),
+        ("penetration", &[x, "max interpenetration (mm)"]),
+        ("timings", &[x, "time per step (ms)", "nlgs"]),
+        ("phases", &["wall-clock time (s)", "detection"]),
+    ] {
+        assert!(
+            md.contains(&format!("](plots/{name}.png)")),
+            "no {name}.png"
+        );
+        assert!(
+            md.contains(&format!("](plots/{name}.svg)")),
+            "no link to {name}.svg"
+        );
+        figures::check(&a.join("plots"), name, labels);
+    }
+    let drawn: Vec<&str> = figures::DETERMINISTIC
+        .into_iter()
+        .filter(|n| a.join("plots").join(format!("{n}.svg")).exists())
+        .collect();
+    assert_eq!(drawn, ["solver", "energy", "penetration"]);
+    figures::same(&a.join("plots"), &b.join("plots"), &drawn);
 }
 
 #[test]
@@ -295,6 +327,27 @@ fn scaling_study_times_the_listed_thread_counts() {
         ]
     );
     assert!(rows.iter().filter(|r| r.1 == 1).all(|r| r.2 == 1.0));
+    // The plots beside the JSON, each as SVG and PNG.
+    let plots = dir.join("s_plots");
+    figures::check(
+        &plots,
+        "speedup",
+        &["threads", "speedup T1/Tp (-)", "ideal", "DDM 2x1x1"],
+    );
+    figures::check(
+        &plots,
+        "efficiency",
+        &["threads", "efficiency speedup/threads (%)", "NLGS"],
+    );
+    figures::check(
+        &plots,
+        "timings",
+        &[
+            "wall-clock time over the timed steps (s)",
+            "detection",
+            "3 thr.",
+        ],
+    );
     let out = ballast()
         .args(["bench", "--scaling", "--thread-counts", "2,0"])
         .output()

@@ -7,8 +7,10 @@
 //! * `series.csv`: units in the column names, and values checked against the scenario's
 //!   geometry and tamping cycle (time, block height, tine forces, compacity, overlaps,
 //!   timings) and against `summary.json`;
-//! * `report.md` links decodable, non-blank plots, the track indicators' ones included, and
-//!   reports the final indicators of `summary.json`.
+//! * `report.md` shows every figure as PNG and links its SVG, the track indicators' ones
+//!   included (see `figures/mod.rs` for what is checked of each), the figures that do not
+//!   show wall-clock times are the same bytes for the straight and the resumed run, and the
+//!   report gives the final indicators of `summary.json`.
 //!
 //! The three runs are made once, by whichever test comes first (about 40 s in release on 2
 //! cores, the bed's preparation included).
@@ -18,6 +20,8 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
+
+mod figures;
 
 /// A tiny track: a 0.10 × 0.18 × 0.08 m block on 0.08 m of 31.5/50 ballast (8–12 vertices, as
 /// in `crates/railway/tests/tamping.rs`), 0.32 × 0.26 m bed; cheap deposition (dt 1e-3 s,
@@ -649,37 +653,6 @@ fn track_series_has_units_and_sensible_values() {
     check_series(r, &r.chained);
 }
 
-/// A decoded PNG: size and RGB pixels.
-fn decode_png(path: &Path) -> (u32, u32, Vec<[u8; 3]>) {
-    let bytes = std::fs::read(path).unwrap();
-    assert!(
-        bytes.starts_with(&[0x89, b'P', b'N', b'G', b'\r', b'\n', 0x1a, b'\n']),
-        "{}: no PNG signature",
-        path.display()
-    );
-    let mut dec = png::Decoder::new(std::io::Cursor::new(bytes));
-    dec.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
-    let mut reader = dec
-        .read_info()
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader
-        .next_frame(&mut buf)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    let data = &buf[..info.buffer_size()];
-    let px: Vec<[u8; 3]> = match info.color_type {
-        png::ColorType::Rgb => data.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect(),
-        png::ColorType::Rgba => data.chunks_exact(4).map(|p| [p[0], p[1], p[2]]).collect(),
-        png::ColorType::Grayscale => data.iter().map(|&g| [g, g, g]).collect(),
-        png::ColorType::GrayscaleAlpha => {
-            data.chunks_exact(2).map(|p| [p[0], p[0], p[0]]).collect()
-        }
-        t => panic!("{}: colour type {t:?}", path.display()),
-    };
-    assert_eq!(px.len(), (info.width * info.height) as usize);
-    (info.width, info.height, px)
-}
-
 /// The value of the report's results row `| label | value |`.
 fn report_value(md: &str, label: &str) -> f64 {
     let prefix = format!("| {label} | ");
@@ -692,9 +665,10 @@ fn report_value(md: &str, label: &str) -> f64 {
         .unwrap_or_else(|_| panic!("row {label:?}: {cell:?} is not a number"))
 }
 
-/// `report.md` of a track run: every linked plot exists, is a PNG that decodes to a chart
-/// (not a blank image), the compacity, tine-force and block plots among them; the final
-/// indicators are those of summary.json.
+/// `report.md` of a track run: every figure, the compacity, tine-force and block ones among
+/// them, is shown as PNG and linked as SVG, both files pass `figures::check` with their axis
+/// labels; the straight and the resumed run draw the same bytes; the final indicators are
+/// those of summary.json.
 #[test]
 fn track_report_plots_the_indicators() {
     let r = runs();
@@ -706,18 +680,32 @@ fn track_report_plots_the_indicators() {
             .skip(1)
             .map(|s| &s[..s.find(')').unwrap()])
             .collect();
-        for png in [
-            "compacity.png",
-            "tines.png",
-            "blocks.png",
-            "coordination.png",
-            "solver.png",
-            "energy.png",
-            "penetration.png",
-            "timings.png",
-            "phases.png",
+        let x = "time (s)";
+        for (name, labels) in [
+            (
+                "compacity",
+                &[x, "compacity (-)", "under block 1", "crib 0"][..],
+            ),
+            ("tines", &[x, "tine 1 x", "tine 4 z"]),
+            ("blocks", &[x, "block height z (mm)"]),
+            ("coordination", &[x, "contacts per grain (-)"]),
+            (
+                "solver",
+                &[x, "contacts (-)", "iterations (-)", "residual (-)"],
+            ),
+            ("energy", &[x, "kinetic energy (J)"]),
+            ("penetration", &[x, "max interpenetration (mm)"]),
+            ("timings", &[x, "time per step (ms)", "detection"]),
+            ("phases", &["wall-clock time (s)", "detection", "other"]),
         ] {
-            assert!(links.contains(&png), "report.md does not show {png}");
+            for ext in ["png", "svg"] {
+                let file = format!("{name}.{ext}");
+                assert!(
+                    links.contains(&file.as_str()),
+                    "report.md does not link {file}"
+                );
+            }
+            figures::check(&dir.join("plots"), name, labels);
         }
         for caption in [
             "Compacity per control volume",
@@ -725,35 +713,6 @@ fn track_report_plots_the_indicators() {
             "Block position",
         ] {
             assert!(md.contains(caption), "no {caption:?} in report.md");
-        }
-        for file in &links {
-            let path = dir.join("plots").join(file);
-            let (w, h, px) = decode_png(&path);
-            let mut colours = px.clone();
-            colours.sort_unstable();
-            colours.dedup();
-            // Not blank: drawn pixels (axes, text, curves) beyond the background.
-            let background = px.iter().filter(|&&p| p == px[0]).count();
-            let drawn = px.len() - background;
-            eprintln!(
-                "{}: {w} × {h}, {} colours, {:.1} % drawn",
-                path.display(),
-                colours.len(),
-                100.0 * drawn as f64 / px.len() as f64
-            );
-            assert!(w >= 400 && h >= 300, "{}: {w} × {h}", path.display());
-            assert!(
-                colours.len() >= 5,
-                "{}: {} colours",
-                path.display(),
-                colours.len()
-            );
-            assert!(
-                drawn * 100 >= px.len(),
-                "{}: {drawn} of {} pixels drawn",
-                path.display(),
-                px.len()
-            );
         }
         // The final indicators, to the report's 4 significant digits.
         let ind = &sum["indicators"];
@@ -789,7 +748,7 @@ fn track_report_plots_the_indicators() {
                 );
             }
         }
-        // Nothing but linked plots in plots/.
+        // Nothing but linked figures in plots/.
         for e in std::fs::read_dir(dir.join("plots")).unwrap() {
             let name = e.unwrap().file_name().to_string_lossy().into_owned();
             assert!(
@@ -798,4 +757,11 @@ fn track_report_plots_the_indicators() {
             );
         }
     }
+    // Same scenario, same state at every row: the same figures, byte for byte (those that do
+    // not show wall-clock times), though one run was stopped and resumed twice.
+    figures::same(
+        &r.chained.join("plots"),
+        &r.straight.join("plots"),
+        &figures::DETERMINISTIC,
+    );
 }
