@@ -93,7 +93,7 @@ struct Family {
     default_unit: &'static str,
 }
 
-const FAMILIES: [Family; 4] = [
+const FAMILIES: [Family; 6] = [
     Family {
         prefix: "compacity_",
         file: "compacity",
@@ -125,6 +125,22 @@ const FAMILIES: [Family; 4] = [
         quantity: "contacts per grain",
         noun: "mean",
         default_unit: "-",
+    },
+    Family {
+        prefix: "tine_drive_",
+        file: "tine_drives",
+        title: "Forces of the tamping unit on the tines",
+        quantity: "drive force",
+        noun: "tine",
+        default_unit: "N",
+    },
+    Family {
+        prefix: "tine_travel_",
+        file: "tine_travel",
+        title: "Tine travel, achieved and commanded",
+        quantity: "displacement",
+        noun: "tine",
+        default_unit: "m",
     },
 ];
 

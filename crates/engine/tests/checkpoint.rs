@@ -21,7 +21,7 @@ use std::sync::OnceLock;
 
 const DIAMETER: [f64; 2] = [0.025, 0.05];
 const GRAINS: usize = 60;
-const SEED: u64 = 7;
+const SEED: u64 = 5;
 /// Grains land around step 300; by 700 there are persisting contacts carrying impulses.
 const SPLIT: u64 = 700;
 const TOTAL: u64 = 1000;

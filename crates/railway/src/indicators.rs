@@ -6,13 +6,22 @@
 //!   over the block width, from soffit to top level);
 //! * `block_z_K_m`: height of block K's centre (m);
 //! * `tine_force_J_x_N`, `tine_force_J_z_N`: force of the ballast on tine J (blade + shaft),
-//!   along the track and vertical, the mean over the last step (contact impulses / h);
+//!   along the track and vertical, the mean over the last step (contact impulses / h). It
+//!   includes the tine's inertia: a vibrating tine striking a stone feels more than its
+//!   cylinder gives (over a vibration period the two agree);
+//! * `tine_drive_J_x_N`, `tine_drive_J_z_N`: force the tamping unit exerts on tine J over the
+//!   last step (the drive's impulse / h), within `±squeeze_force` and `±insertion_force`;
+//! * `tine_travel_J_x_m`, `tine_travel_J_z_m`: displacement of tine J since the start, and
+//!   `tine_travel_J_x_command_m`, `tine_travel_J_z_command_m` the displacement its program
+//!   commanded (vibration included): a tine that met more resistance than its limit lags;
 //! * `coordination`: mean number of grain–grain contacts per grain (pairs carrying a
 //!   compressive normal impulse, counted once however many contact points they have).
 
 use crate::compacity::solid_volume;
 use crate::scene::Layout;
 use crate::track::{Aabb, TrackSpec};
+use ballast_engine::bodies::BodySet;
+use ballast_engine::math::DVec3;
 use ballast_engine::world::World;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -24,13 +33,35 @@ pub struct Indicators {
     volumes: Vec<Aabb>,
     blocks: Vec<usize>,
     tines: Vec<[usize; 2]>,
+    /// Blade positions at t = 0.
+    tine_starts: Vec<DVec3>,
     grains: Range<usize>,
+}
+
+/// Displacement the driver commands over the first `steps` steps of length `h`, by the
+/// θ-rule of the position update, on the world's clock (`t += h`, so that a velocity jump
+/// falls on the same step as in the run).
+fn commanded_displacement(
+    d: &ballast_engine::bodies::Driver,
+    h: f64,
+    theta: f64,
+    steps: u64,
+) -> DVec3 {
+    let (mut x, mut t) = (DVec3::ZERO, 0.0);
+    let mut v0 = d.velocity(0.0).0;
+    for _ in 0..steps {
+        t += h;
+        let v1 = d.velocity(t).0;
+        x += h * (theta * v1 + (1.0 - theta) * v0);
+        v0 = v1;
+    }
+    x
 }
 
 impl Indicators {
     /// The indicators of `track` built with `layout`; `depth` is the height of the control
-    /// volumes under the blocks (m).
-    pub fn new(track: &TrackSpec, layout: &Layout, depth: f64) -> Self {
+    /// volumes under the blocks (m); `bodies` are the bodies at t = 0.
+    pub fn new(track: &TrackSpec, layout: &Layout, depth: f64, bodies: &BodySet) -> Self {
         let mut names = Vec::new();
         let mut volumes = Vec::new();
         for k in 1..=track.blocks {
@@ -51,12 +82,23 @@ impl Indicators {
             names.push(format!("tine_force_{j}_x_N"));
             names.push(format!("tine_force_{j}_z_N"));
         }
+        for j in 1..=layout.tines.len() {
+            names.push(format!("tine_drive_{j}_x_N"));
+            names.push(format!("tine_drive_{j}_z_N"));
+        }
+        for j in 1..=layout.tines.len() {
+            for a in ["x", "z"] {
+                names.push(format!("tine_travel_{j}_{a}_m"));
+                names.push(format!("tine_travel_{j}_{a}_command_m"));
+            }
+        }
         names.push("coordination".into());
         Indicators {
             names,
             volumes,
             blocks,
             tines: layout.tines.clone(),
+            tine_starts: layout.tines.iter().map(|t| bodies.position[t[0]]).collect(),
             grains: layout.grains.clone(),
         }
     }
@@ -88,6 +130,19 @@ impl Indicators {
             let f = (pair[0] + pair[1]) / h;
             out.push(f.x);
             out.push(f.z);
+        }
+        for [blade, _] in &self.tines {
+            let d = world.drives().iter().find(|d| d.body as usize == *blade);
+            let f = d.map_or(DVec3::ZERO, |d| d.impulse_v / h);
+            out.push(f.x);
+            out.push(f.z);
+        }
+        for (j, [blade, _]) in self.tines.iter().enumerate() {
+            let moved = b.position[*blade] - self.tine_starts[j];
+            let commanded = b.driver[*blade].as_ref().map_or(DVec3::ZERO, |d| {
+                commanded_displacement(d, h, world.settings.theta, world.step_index)
+            });
+            out.extend([moved.x, commanded.x, moved.z, commanded.z]);
         }
         out.push(self.coordination(world));
         out

@@ -98,7 +98,7 @@ pub enum Blocks {
     /// Fixed in their design position.
     Fixed,
     /// Driven by the given driver (lift, then release).
-    Driven(Driver),
+    Driven(Box<Driver>),
 }
 
 fn cuboid(b: &Aabb) -> PolyhedronBuild {
@@ -128,7 +128,7 @@ pub fn build_bodies(
     let (kind, driver) = match blocks {
         Blocks::Absent => (None, None),
         Blocks::Fixed => (Some(BodyKind::Fixed), None),
-        Blocks::Driven(d) => (Some(BodyKind::Kinematic), Some(d.clone())),
+        Blocks::Driven(d) => (Some(BodyKind::Kinematic), Some(Driver::clone(d))),
     };
     if let Some(kind) = kind {
         for k in 1..=track.blocks {
@@ -147,11 +147,18 @@ pub fn build_bodies(
             for (slot, bx) in [&t.blade, &t.shaft].into_iter().enumerate() {
                 let mut build = cuboid(bx);
                 build.position = bx.centre();
-                // Tines are driven for ever; their density only matters for outputs.
                 let i = b.add_polyhedron(build, 7850.0, BodyKind::Kinematic, TINE);
-                b.driver[i] = Some(t.driver.clone());
                 ids[slot] = i;
             }
+            // The blade carries the drive and the tine's moving mass; the shaft is a rigid
+            // part of it, so the ballast's forces on the shaft load the same drive.
+            let [blade, shaft] = ids;
+            b.driver[blade] = Some(t.driver.clone());
+            b.inv_mass[blade] = 1.0 / t.mass;
+            b.driver[shaft] = Some(Driver {
+                attached_to: Some(blade),
+                ..Driver::default()
+            });
             tines.push(ids);
         }
     }

@@ -21,7 +21,17 @@
 //! blocks are released after the last one.
 //!
 //! Every motion is a trapezoidal velocity profile (ramps of `ramp` seconds), so positions follow
-//! exactly from the kinematic drivers' trapezoidal integration.
+//! exactly from the drivers' trapezoidal integration while the tines are below their limits.
+//!
+//! # The tamping unit as a machine
+//!
+//! The tines are hydraulic: each follows its program only while the force it needs stays
+//! within its cylinder's limit (see [`ballast_engine::bodies::driver`]): `squeeze_force` along
+//! the track, `insertion_force` vertically (insertion and withdrawal), both per tine; beyond
+//! it the tine stalls, and its travel falls short of the commanded one. The vibration is
+//! superposed on the squeeze whatever the force (the eccentric drives the tine arm). Across
+//! the track and in rotation the tines are held by the unit's frame (no limit). A tine moves
+//! with the mass `tine_mass` (tine and its share of the arm).
 //!
 //! # Tines
 //!
@@ -33,7 +43,7 @@
 
 use crate::error::{check_range, refuse, FieldError};
 use crate::track::{Aabb, TrackSpec};
-use ballast_engine::bodies::{Driver, Term};
+use ballast_engine::bodies::{Driver, Term, Velocities};
 use ballast_engine::math::DVec3;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::{FRAC_PI_2, TAU};
@@ -75,6 +85,12 @@ pub struct TampingSpec {
     pub lower_time: f64,
     /// Acceleration ramps of every trapezoidal motion (s).
     pub ramp: f64,
+    /// Largest squeezing force of one tine along the track (N; `inf`: a kinematic tine).
+    pub squeeze_force: f64,
+    /// Largest vertical force of one tine, inserting or withdrawing (N; `inf`: kinematic).
+    pub insertion_force: f64,
+    /// Moving mass of one tine (kg): the tine and its share of the arm.
+    pub tine_mass: f64,
 }
 
 impl Default for TampingSpec {
@@ -98,9 +114,22 @@ impl Default for TampingSpec {
             withdraw_time: 0.25,
             lower_time: 0.214,
             ramp: 0.02,
+            squeeze_force: DEFAULT_SQUEEZE_FORCE,
+            insertion_force: DEFAULT_INSERTION_FORCE,
+            tine_mass: 25.0,
         }
     }
 }
+
+/// Default [`TampingSpec::squeeze_force`] (N per tine): 7.8 kN per pair of picks, the
+/// squeezing force found best for bed stiffness and sleeper support in a DEM–MBD study of
+/// three-sleeper tamping (Tiedao Xuebao, 2024), shared by the pair's two picks.
+pub const DEFAULT_SQUEEZE_FORCE: f64 = 3900.0;
+
+/// Default [`TampingSpec::insertion_force`] (N per tine): a tamping unit of about 2 t pressed
+/// down on its 8 tines, plus its vertical cylinder (an estimate; the literature gives
+/// insertion speeds rather than forces).
+pub const DEFAULT_INSERTION_FORCE: f64 = 5000.0;
 
 /// One tine of the built cycle.
 #[derive(Clone, Debug, PartialEq)]
@@ -113,8 +142,10 @@ pub struct Tine {
     pub blade: Aabb,
     /// Shaft box at t = 0.
     pub shaft: Aabb,
-    /// The shared driver of blade and shaft.
+    /// The driver of the blade (the shaft is attached to the blade).
     pub driver: Driver,
+    /// Moving mass (kg).
+    pub mass: f64,
 }
 
 /// Times of the phases of one tamped block (s).
@@ -242,6 +273,15 @@ impl TampingSpec {
             }
         }
         check_range("tamping.ramp", self.ramp, 0.0, 1.0, "s")?;
+        for (name, f) in [
+            ("tamping.squeeze_force", self.squeeze_force),
+            ("tamping.insertion_force", self.insertion_force),
+        ] {
+            if f.is_nan() || f <= 0.0 {
+                return Err(refuse(name, f, "> 0 N per tine (inf: a kinematic tine)"));
+            }
+        }
+        check_range("tamping.tine_mass", self.tine_mass, 0.1, 1e4, "kg")?;
         // Tines must fit in the crib in front of the block (the bed end for end blocks).
         for &b in &self.blocks {
             let bb = track.block_box(b);
@@ -313,10 +353,11 @@ impl TampingSpec {
                         min: DVec3::new(x - 0.5 * sx, y - 0.5 * sy, tip + bh),
                         max: DVec3::new(x + 0.5 * sx, y + 0.5 * sy, shaft_top),
                     };
-                    let mut vx = vec![motion(p.squeeze, p.hold, -side * self.squeeze, self.ramp)];
+                    let vx = vec![motion(p.squeeze, p.hold, -side * self.squeeze, self.ramp)];
+                    let mut vibration = Vec::new();
                     if self.amplitude > 0.0 && self.frequency > 0.0 && periods > 0.0 {
                         // Displacement −side·A·sin(ω(t − t₀)): mirror images either side.
-                        vx.push(Term::Sine {
+                        vibration.push(Term::Sine {
                             amplitude: -side * self.amplitude * TAU * self.frequency,
                             frequency: self.frequency,
                             phase: FRAC_PI_2,
@@ -336,8 +377,14 @@ impl TampingSpec {
                         driver: Driver {
                             vx,
                             vz,
+                            max_force: [self.squeeze_force, f64::INFINITY, self.insertion_force],
+                            superposed: Velocities {
+                                vx: vibration,
+                                ..Velocities::default()
+                            },
                             ..Driver::default()
                         },
+                        mass: self.tine_mass,
                     });
                 }
             }
@@ -396,7 +443,14 @@ mod tests {
             assert!(displacement(&tine.driver.vz, 0.0, c.duration).abs() < 1e-6);
             // Squeeze toward the block, vibration averages out over whole periods (exactly; the
             // quadrature errs by up to h·Aω/2 ≈ 3e-6 m at the velocity jumps of the sine's ends).
-            let dx = displacement(&tine.driver.vx, 0.0, c.duration);
+            let vx: Vec<Term> = tine
+                .driver
+                .vx
+                .iter()
+                .chain(&tine.driver.superposed.vx)
+                .cloned()
+                .collect();
+            let dx = displacement(&vx, 0.0, c.duration);
             assert!((dx + tine.side * s.squeeze).abs() < 1e-5, "{dx}");
             // Inner face ends open_gap − squeeze from the block face.
             let face = track.block_box(1);
@@ -409,7 +463,7 @@ mod tests {
         }
         // Vibration amplitude: peak displacement about A around the mean path.
         let tine = &c.tines[0];
-        let vib: Vec<Term> = tine.driver.vx[1..].to_vec();
+        let vib: Vec<Term> = tine.driver.superposed.vx.clone();
         let mut max: f64 = 0.0;
         for k in 0..400 {
             let t = p.insertion + k as f64 * 1e-4;

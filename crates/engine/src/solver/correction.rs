@@ -56,7 +56,7 @@ impl Default for CorrectionSettings {
 }
 
 /// JSON writes an infinite `max_push` (no limit) as `null`: read it back as infinite.
-fn infinite_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+pub(crate) fn infinite_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
     Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
 }
 

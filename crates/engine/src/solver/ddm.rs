@@ -28,7 +28,7 @@ use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
 use super::nlgs::{Nlgs, SolveReport, SweepSums};
 use super::partition::{Balance, Partition, STATIC};
-use super::ConvergenceNorm;
+use super::StopRule;
 use crate::laws::ContactStatus;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -623,6 +623,7 @@ pub fn solve_and_correct(
     // 2. DDM iterations.
     let s = &nlgs.settings;
     let total_rows = locals.len() + dr.len();
+    let mut stop = StopRule::new();
     if total_rows == 0 {
         report.converged = true;
     }
@@ -634,7 +635,7 @@ pub fn solve_and_correct(
         let sub_sums = for_subdomains(p, pb, starts, min_parallel, |b, v| {
             let mut sums = SweepSums::default();
             for _ in 0..ddm.inner_sweeps {
-                sums = nlgs.sweep(&mut b.locals, v, &mut b.status);
+                sums = nlgs.sweep_k(j, &mut b.locals, v, &mut b.status);
             }
             sums
         });
@@ -643,7 +644,7 @@ pub fn solve_and_correct(
         let mut gamma_sums = vec![SweepSums::default(); p.groups.len()];
         for _ in 0..ddm.interface_sweeps {
             gamma_sums = for_interface(p, pb, starts, min_parallel, |b, v| {
-                nlgs.sweep(&mut b.locals, v, &mut b.status)
+                nlgs.sweep_k(j, &mut b.locals, v, &mut b.status)
             });
         }
         let drive_sums = drive::sweep(dr, pb.as_mut_slice());
@@ -655,18 +656,12 @@ pub fn solve_and_correct(
         sums += drive_sums;
         report.iterations = j;
         report.quad = sums.quad();
-        if j % s.check_every == 0 || j == s.max_iterations {
-            let measure = match s.norm {
-                ConvergenceNorm::Quad => report.quad,
-                ConvergenceNorm::NaturalMap => residual(nlgs, p, dr, pb, q),
-            };
-            if measure <= s.tolerance {
-                report.converged = true;
-                break;
-            }
+        if stop.converged(s, j, report.quad, || residual(nlgs, p, dr, pb, q)) {
+            report.converged = true;
+            break;
         }
     }
-    report.residual = residual(nlgs, p, dr, pb, q);
+    report.residual = stop.final_residual(report.iterations, || residual(nlgs, p, dr, pb, q));
     for (d, w) in drives.iter_mut().zip(dr.iter()) {
         d.impulse_v = w.impulse_v;
         d.impulse_w = w.impulse_w;

@@ -7,17 +7,20 @@
 //! 2. For k = 1, 2, … up to `max_iterations`, sweep α in the given order:
 //!    1. `u = H_αᵀ V`, then `u_f = u − W_αα r_α` (velocity without α's own impulse);
 //!    2. if `g_α + h θ u_f,n > 0` (gap prediction): `r̂ = 0`; else `r̂` = exact local
-//!       Signorini-Coulomb solution for `(W_αα, u_f, μ_α)`, a slide's Newton iteration starting
-//!       from the direction of `r_α` ([`crate::laws::coulomb::solve_local_from`]);
+//!       Signorini-Coulomb solution for `(W_αα, u_f + (max(g_α, 0)/hθ) n, μ_α)` (Signorini on
+//!       the predicted gap: the contact closes its gap within the step and no further), a
+//!       slide's Newton iteration starting from the direction of `r_α`
+//!       ([`crate::laws::coulomb::solve_local_from`]);
 //!    3. relax `r_new = (1 − ω) r_α + ω r̂`, apply `V += M⁻¹ H_α (r_new − r_α)`, `r_α = r_new`;
 //!    4. accumulate `‖W_αα Δr_α‖²` and `‖W_αα r_α‖²` for the Quad norm.
-//! 3. Every `check_every` sweeps, evaluate the chosen norm; stop when it is below `tolerance`.
+//! 3. Every `check_every` sweeps, evaluate the chosen norm; stop when it is below `tolerance`
+//!    and the natural-map residual is below `residual_tolerance` (see [`SolverSettings`]).
 //! 4. Report iterations, the final Quad norm and natural-map residual, and convergence.
 
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
-use super::{ConvergenceNorm, SolverSettings};
-use crate::laws::coulomb::{natural_map_residual, solve_local_from};
+use super::{SolverSettings, StopRule};
+use crate::laws::coulomb::{natural_map_residual, project_on_cone, solve_local_from};
 use crate::laws::ContactStatus;
 use crate::math::DVec3;
 use serde::{Deserialize, Serialize};
@@ -93,13 +96,16 @@ impl Nlgs {
             // W⁻¹ is not stored: at large scale the sweep is bound by memory traffic, and the
             // inverse costs less than streaming 72 more bytes per contact.
             let w = c.w.to_mat();
-            solve_local_from(&w, &w.inverse(), uf, c.mu, c.r)
+            solve_local_from(&w, &w.inverse(), self.shifted(c, uf), c.mu, c.r)
         };
         let om = self.settings.relaxation;
         let rnew = if om == 1.0 {
             rhat
-        } else {
+        } else if om < 1.0 {
             c.r + (rhat - c.r) * om
+        } else {
+            // Over-relaxation can leave the cone: project back onto it.
+            project_on_cone(c.r + (rhat - c.r) * om, c.mu)
         };
         let dr = rnew - c.r;
         if dr != DVec3::ZERO {
@@ -111,18 +117,29 @@ impl Nlgs {
         status
     }
 
-    /// Natural-map residual contribution `‖·‖²` of contact α at the current state.
+    /// The velocity the Signorini condition acts on: `u + (max(g, 0) / hθ) n`, so that a
+    /// contact with a positive gap may close it within the step (`g + hθ uₙ ≥ 0`) and no
+    /// further. Signorini on `uₙ` itself would stop the bodies at the gap they had while the
+    /// gap prediction calls that same state open: a contact then flips between the two from
+    /// sweep to sweep, a limit cycle Gauss-Seidel never leaves.
+    #[inline(always)]
+    fn shifted(&self, c: &LocalProblem, u: DVec3) -> DVec3 {
+        if c.gap > 0.0 {
+            DVec3::new(u.x + c.gap / self.h_theta, u.y, u.z)
+        } else {
+            u
+        }
+    }
+
+    /// Natural-map residual contribution `‖·‖²` of contact α at the current state, on the
+    /// shifted velocity (see [`Nlgs::update_contact`]); an open contact with no impulse
+    /// contributes nothing, one with an impulse `‖W_nn r‖`.
     #[inline]
     pub fn residual2<B: BodyAccess + ?Sized>(&self, c: &LocalProblem, v: &B) -> f64 {
         let u = c.velocity(v);
-        let uf = u - c.w * c.r;
-        if c.gap + self.h_theta * uf.x > 0.0 {
-            (c.r * c.w.xx()).length_squared()
-        } else {
-            // ρ = 1/W_nn makes `r − ρ u` consistent in units (N·s); dividing by ρ gives m/s.
-            let rho = 1.0 / c.w.xx();
-            (natural_map_residual(c.r, u * rho, c.mu) / rho).powi(2)
-        }
+        // ρ = 1/W_nn makes `r − ρ u` consistent in units (N·s); dividing by ρ gives m/s.
+        let rho = 1.0 / c.w.xx();
+        (natural_map_residual(c.r, self.shifted(c, u) * rho, c.mu) / rho).powi(2)
     }
 
     /// `Σ ‖H_αᵀ V‖²` over `locals`: on `V_free`, the squared scale of the residual.
@@ -148,6 +165,25 @@ impl Nlgs {
     ) -> SweepSums {
         let mut sums = SweepSums::default();
         for (c, st) in locals.iter_mut().zip(status.iter_mut()) {
+            *st = self.update_contact(c, v, &mut sums);
+        }
+        sums
+    }
+
+    /// Sweep `k` (1-based) of a solve: forward, or with [`SolverSettings::symmetric`] every
+    /// even sweep backward.
+    pub fn sweep_k<B: BodyAccess + ?Sized>(
+        &self,
+        k: usize,
+        locals: &mut [LocalProblem],
+        v: &mut B,
+        status: &mut [ContactStatus],
+    ) -> SweepSums {
+        if !(self.settings.symmetric && k.is_multiple_of(2)) {
+            return self.sweep(locals, v, status);
+        }
+        let mut sums = SweepSums::default();
+        for (c, st) in locals.iter_mut().zip(status.iter_mut()).rev() {
             *st = self.update_contact(c, v, &mut sums);
         }
         sums
@@ -189,23 +225,22 @@ impl Nlgs {
             return report;
         }
         let s = &self.settings;
+        let mut stop = StopRule::new();
         for k in 1..=s.max_iterations {
-            let mut sums = self.sweep(locals, v, status);
+            let mut sums = self.sweep_k(k, locals, v, status);
             sums += drive::sweep(drives, v);
             report.iterations = k;
             report.quad = sums.quad();
-            if k % s.check_every == 0 || k == s.max_iterations {
-                let measure = match s.norm {
-                    ConvergenceNorm::Quad => report.quad,
-                    ConvergenceNorm::NaturalMap => self.natural_residual(locals, drives, v, q),
-                };
-                if measure <= s.tolerance {
-                    report.converged = true;
-                    break;
-                }
+            if stop.converged(s, k, report.quad, || {
+                self.natural_residual(locals, drives, v, q)
+            }) {
+                report.converged = true;
+                break;
             }
         }
-        report.residual = self.natural_residual(locals, drives, v, q);
+        report.residual = stop.final_residual(report.iterations, || {
+            self.natural_residual(locals, drives, v, q)
+        });
         report
     }
 
