@@ -19,6 +19,13 @@ use std::path::{Path, PathBuf};
 /// Checkpoints kept in `DIR/checkpoints` (the newest ones).
 const KEEP_CHECKPOINTS: usize = 3;
 
+/// Overlaps deeper than this (m) are reported on stderr with the two bodies (4 % of the
+/// smallest ballast grain).
+const OVERLAP_REPORT: f64 = 1e-3;
+
+/// Steps with such an overlap named one by one; beyond, only their number.
+const OVERLAP_LINES: u64 = 20;
+
 /// What `ballast run` was asked to do.
 pub struct RunArgs<'a> {
     /// Scenario file; `None`: `preset`, or `out/scenario.toml` when resuming.
@@ -266,10 +273,22 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     std::fs::create_dir_all(&ckpt_dir).map_err(io)?;
     let start = world.step_index;
     let mut progress = Progress::new(steps.saturating_sub(start), a.quiet);
+    let mut deep_steps = 0u64;
     while world.step_index < steps {
         let r = world.step();
         stats.add(&r);
         let k = r.step;
+        if r.max_penetration > OVERLAP_REPORT {
+            deep_steps += 1;
+            if !a.quiet && deep_steps <= OVERLAP_LINES {
+                let [b1, b2] = r.deepest;
+                eprintln!(
+                    "warning: step {k}: overlap {:.2} mm between bodies {b1} and {b2} (more than {} mm)",
+                    r.max_penetration * 1e3,
+                    OVERLAP_REPORT * 1e3
+                );
+            }
+        }
         if k % output_interval == 0 || k == steps {
             writeln!(series, "{}", row(&r, &world)).map_err(io)?;
         }
@@ -285,6 +304,13 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
         progress.update(k - start, r.time, r.contacts, r.solve.iterations);
     }
     progress.finish();
+    if !a.quiet && deep_steps > OVERLAP_LINES {
+        eprintln!(
+            "warning: {deep_steps} steps of this session had an overlap of more than {} mm \
+             (the first {OVERLAP_LINES} named above)",
+            OVERLAP_REPORT * 1e3
+        );
+    }
     series.flush().map_err(io)?;
     write_checkpoint_with_stats(
         &world,

@@ -85,6 +85,9 @@ pub struct StepReport {
     pub solve: SolveReport,
     /// Largest overlap `max(−g, 0)` among the contacts detected at the start of the step (m).
     pub max_penetration: f64,
+    /// The two bodies of that overlap (meaningful when it is positive).
+    #[serde(default)]
+    pub deepest: [u32; 2],
     pub times: PhaseTimes,
 }
 
@@ -339,6 +342,12 @@ impl World {
     /// Advances one time step.
     pub fn step(&mut self) -> StepReport {
         let (max_penetration, mut times) = self.prepare();
+        let deepest = self
+            .contacts
+            .gap
+            .iter()
+            .position(|&g| -g == max_penetration)
+            .map_or([0, 0], |k| [self.contacts.body1[k], self.contacts.body2[k]]);
         let mut lap = Lap::start();
         let nlgs = self.nlgs();
         let s = &self.settings;
@@ -463,6 +472,7 @@ impl World {
             contacts: self.contacts.len(),
             solve,
             max_penetration,
+            deepest,
             times,
         }
     }
