@@ -289,12 +289,20 @@ impl Velocities {
 
     /// (linear, angular) velocity at time `t`.
     pub fn at(&self, t: f64) -> (crate::math::DVec3, crate::math::DVec3) {
-        let e = |p: &Profile| p.iter().map(|term| term.eval(t)).sum::<f64>();
-        (
-            crate::math::DVec3::new(e(&self.vx), e(&self.vy), e(&self.vz)),
-            crate::math::DVec3::new(e(&self.wx), e(&self.wy), e(&self.wz)),
-        )
+        velocities_at(self.dofs(), t)
     }
+}
+
+/// (linear, angular) velocity at time `t` of six profiles in the order vx … wz.
+fn velocities_at(
+    dofs: [(&'static str, &Profile); 6],
+    t: f64,
+) -> (crate::math::DVec3, crate::math::DVec3) {
+    let e = |k: usize| dofs[k].1.iter().map(|term| term.eval(t)).sum::<f64>();
+    (
+        crate::math::DVec3::new(e(0), e(1), e(2)),
+        crate::math::DVec3::new(e(3), e(4), e(5)),
+    )
 }
 
 fn unlimited() -> [f64; 3] {
@@ -326,11 +334,7 @@ impl Driver {
     /// Commanded (linear, angular) velocity at time `t`: the program plus the superposed
     /// velocities (what a kinematic body does).
     pub fn velocity(&self, t: f64) -> (crate::math::DVec3, crate::math::DVec3) {
-        let e = |p: &Profile| p.iter().map(|term| term.eval(t)).sum::<f64>();
-        let (v, w) = (
-            crate::math::DVec3::new(e(&self.vx), e(&self.vy), e(&self.vz)),
-            crate::math::DVec3::new(e(&self.wx), e(&self.wy), e(&self.wz)),
-        );
+        let (v, w) = velocities_at(self.dofs(), t);
         if self.superposed.is_empty() {
             return (v, w);
         }
