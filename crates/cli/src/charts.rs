@@ -178,9 +178,7 @@ pub enum Figure {
     Panels(Vec<LineChart>),
     /// Stacked bars, wider with many categories.
     Bars(BarChart),
-    /// A scatter coloured by value.
-    // For section pictures (values on a cut through the bed); the tests draw it.
-    #[allow(dead_code)]
+    /// A scatter coloured by value: the section pictures of a track run.
     Map(ScatterMap),
 }
 

@@ -9,11 +9,13 @@
 //! Every file is written atomically (temporary file, then rename), so an interrupted run
 //! never leaves a half-written report or image.
 
-use crate::charts::{write_figure, BarChart, Figure, LineChart, Series, Style, REFERENCE};
+use crate::charts::{
+    write_figure, BarChart, Figure, LineChart, ScatterMap, Series, Style, REFERENCE,
+};
 use serde_json::Value;
 use std::fmt::Write as _;
 use std::io::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The per-phase bar of a run (figure name), shown under the timing table.
 const PHASES_FIG: &str = "phases";
@@ -498,6 +500,7 @@ pub fn write_run_report(
         Some(t) => run_plots(&plots_dir, t, summary),
         None => Plots::default(),
     };
+    section_plots(&out.join("sections"), &plots_dir, &mut plots);
     let breakdown = BarChart {
         title: "Time per phase (Table 1)".into(),
         y_label: "wall-clock time (s)".into(),
@@ -532,6 +535,100 @@ pub fn write_run_report(
         Ok(())
     } else {
         Err(format!("some plots failed: {}", plots.errors.join("; ")))
+    }
+}
+
+/// Loads below this (N) are drawn at this value on the log colour scale: a grain touching
+/// nothing (or only open contacts) carries nothing, and log 0 is not a colour.
+const LOAD_FLOOR: f64 = 0.1;
+
+/// Draws every `sections/*.csv` of the run (see `ballast_railway::sections`): each coloured
+/// by the load its grains carry, and the sections at the end of a squeeze also by speed.
+fn section_plots(dir: &Path, plots_dir: &Path, plots: &mut Plots) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "csv"))
+        .collect();
+    // Start, squeezes, then the end: the order of the moments in the cycle.
+    files.sort_by_key(|p| {
+        let n = p.file_stem().map(|s| s.to_string_lossy().into_owned());
+        let n = n.unwrap_or_default();
+        let rank = if n.starts_with("start") {
+            0
+        } else if n.starts_with("end-of-squeeze") {
+            1
+        } else {
+            2
+        };
+        (rank, n)
+    });
+    for f in files {
+        let Some(stem) = f.file_stem().map(|s| s.to_string_lossy().into_owned()) else {
+            continue;
+        };
+        let Some((moment, plane)) = stem.split_once('_') else {
+            continue;
+        };
+        let Ok(text) = std::fs::read_to_string(&f) else {
+            plots.errors.push(format!("cannot read {}", f.display()));
+            continue;
+        };
+        let t = Table::parse(&text);
+        let (Some(u), Some(z), Some(v), Some(l)) = (
+            t.col("u_m"),
+            t.col("z_m"),
+            t.col("speed_m_s"),
+            t.col("load_N"),
+        ) else {
+            plots
+                .errors
+                .push(format!("{}: not a section file", f.display()));
+            continue;
+        };
+        let (axis, words) = match plane {
+            "tine-plane" => ("x (m)", "along the track through a tine row"),
+            "block-axis" => ("y (m)", "across the track through the block's axis"),
+            _ => ("u (m)", plane),
+        };
+        let when = moment.replace('-', " ");
+        let span = t
+            .rows
+            .iter()
+            .map(|r| r[u])
+            .fold((f64::MAX, f64::MIN), |a, x| (a.0.min(x), a.1.max(x)));
+        // Markers about a grain wide: a 35 mm grain over the plot's width in pixels.
+        let plot_px = f64::from(crate::charts::WIDTH) - 560.0;
+        let radius = (0.5 * 0.035 * plot_px / (span.1 - span.0).max(0.1)).clamp(3.0, 30.0);
+        let map = |value_label: &str, value: &dyn Fn(&[f64]) -> f64| ScatterMap {
+            title: format!("Section {words}: {when}"),
+            x_label: axis.into(),
+            y_label: "z (m)".into(),
+            value_label: value_label.into(),
+            points: t.rows.iter().map(|r| (r[u], r[z], value(r))).collect(),
+            radius,
+            value_range: None,
+        };
+        let load = map("log10 of the load carried (N)", &|r| {
+            r[l].max(LOAD_FLOOR).log10()
+        });
+        plots.write(
+            plots_dir,
+            &format!("section_{stem}_load"),
+            &format!("Section {words}, {when}: load carried by each grain"),
+            &Figure::Map(load),
+        );
+        if moment.starts_with("end-of-squeeze") {
+            let speed = map("speed (m/s)", &|r| r[v]);
+            plots.write(
+                plots_dir,
+                &format!("section_{stem}_speed"),
+                &format!("Section {words}, {when}: grain speed"),
+                &Figure::Map(speed),
+            );
+        }
     }
 }
 

@@ -12,6 +12,7 @@ use ballast_engine::solver::DdmSettings;
 use ballast_engine::world::{StepReport, World};
 use ballast_railway::indicators::Indicators;
 use ballast_railway::preparation::PrepProgress;
+use ballast_railway::sections::{section_csv, Sections};
 use ballast_railway::{is_track_scenario, TrackScenario};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -61,6 +62,7 @@ struct TrackParts {
     indicators: Indicators,
     grains: usize,
     preparation: serde_json::Value,
+    sections: Sections,
 }
 
 fn apply_subdomains(ddm: &mut Option<DdmSettings>, dims: Option<[usize; 3]>) {
@@ -152,8 +154,18 @@ fn job(a: &RunArgs) -> Result<Job, String> {
             );
         }
         let sim = &s.simulation;
+        let steps = a.steps.unwrap_or_else(|| s.steps());
+        let sections = Sections::new(
+            &s.track,
+            s.tamping.tine_y.first().copied().unwrap_or(0.0),
+            &model.layout,
+            &model.cycle,
+            &s.tamping.blocks,
+            sim.dt,
+            steps,
+        );
         Ok(Job {
-            steps: a.steps.unwrap_or_else(|| s.steps()),
+            steps,
             output_interval: sim.output_interval,
             vtk_interval: sim.vtk_interval,
             checkpoint_interval: sim.checkpoint_interval,
@@ -161,6 +173,7 @@ fn job(a: &RunArgs) -> Result<Job, String> {
                 grains: model.layout.grains.len(),
                 preparation: serde_json::to_value(&model.preparation).unwrap_or_default(),
                 indicators: model.indicators,
+                sections,
             }),
             world: model.world,
             source,
@@ -292,6 +305,9 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
         if k % output_interval == 0 || k == steps {
             writeln!(series, "{}", row(&r, &world)).map_err(io)?;
         }
+        if let Some(t) = &track {
+            write_sections(&t.sections, k, &world, out).map_err(io)?;
+        }
         if vtk_interval > 0 && (k % vtk_interval == 0 || k == steps) {
             vtk.write_frame(&world).map_err(io)?;
         }
@@ -360,6 +376,19 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
             world.timers.total,
             out.display()
         );
+    }
+    Ok(())
+}
+
+/// Writes the sections due after step `k` into `out/sections/`.
+fn write_sections(s: &Sections, k: u64, world: &World, out: &Path) -> std::io::Result<()> {
+    for m in s.due(k) {
+        let dir = out.join("sections");
+        std::fs::create_dir_all(&dir)?;
+        for p in &s.planes {
+            let csv = section_csv(&s.points(world, p));
+            write_atomic(&dir.join(Sections::file_name(m, p)), csv.as_bytes())?;
+        }
     }
     Ok(())
 }

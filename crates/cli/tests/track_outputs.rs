@@ -823,3 +823,107 @@ fn track_report_plots_the_indicators() {
         &figures::DETERMINISTIC,
     );
 }
+
+/// A section file as `(grain, u, z, speed, load)` rows.
+fn section(path: &Path) -> Vec<[f64; 5]> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some(ballast_railway::sections::SECTION_HEADER)
+    );
+    lines
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2], v[3], v[4]]
+        })
+        .collect()
+}
+
+/// The sections of the whole cycle: the prepared bed, the end of the squeeze and after the
+/// release, through a tine row and the block's axis; the same bytes for the straight and the
+/// resumed run; the bed at rest carries more load at its bottom than at its top (its
+/// weight); the squeeze loads the tine plane more than the bed at rest; the report draws
+/// each section coloured by load, and the end of the squeeze by speed too.
+#[test]
+fn track_run_writes_sections_through_the_bed() {
+    let r = runs();
+    let (straight, chained) = (r.straight.join("sections"), r.chained.join("sections"));
+    let moments = ["start", "end-of-squeeze-1", "after-release"];
+    let planes = ["tine-plane", "block-axis"];
+    let track = &r.scenario.track;
+    for m in moments {
+        for p in planes {
+            let name = format!("{m}_{p}.csv");
+            let a = std::fs::read(straight.join(&name)).unwrap();
+            let b = std::fs::read(chained.join(&name)).unwrap();
+            assert!(
+                a == b,
+                "{name} differs between the straight and the resumed run"
+            );
+            let rows = section(&straight.join(&name));
+            assert!(rows.len() >= 10, "{name}: {} grains", rows.len());
+            for row in &rows {
+                let [_, u, z, speed, load] = *row;
+                let half = if p == "tine-plane" {
+                    track.length()
+                } else {
+                    0.5 * track.width
+                };
+                assert!(
+                    u.abs() <= half + 0.05 && u > -half - 0.05,
+                    "{name}: u = {u}"
+                );
+                assert!(z > 0.0 && z < track.top() + 0.05, "{name}: z = {z}");
+                assert!(speed.is_finite() && speed >= 0.0 && load >= 0.0, "{name}");
+            }
+        }
+    }
+    // The bed at rest: the lower half of the section carries more than the upper half.
+    let rest = section(&straight.join("start_tine-plane.csv"));
+    let zs: Vec<f64> = rest.iter().map(|r| r[2]).collect();
+    let mid = 0.5
+        * (zs.iter().cloned().fold(f64::MAX, f64::min)
+            + zs.iter().cloned().fold(f64::MIN, f64::max));
+    let mean = |lower: bool| {
+        let v: Vec<f64> = rest
+            .iter()
+            .filter(|r| (r[2] < mid) == lower)
+            .map(|r| r[4])
+            .collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
+    assert!(
+        mean(true) > mean(false),
+        "lower half {} N, upper {} N",
+        mean(true),
+        mean(false)
+    );
+    // Squeezed: the tines push into the bed, and the section carries more than at rest
+    // (measured: 442 N at rest, 576 N at the end of the squeeze).
+    let total = |f: &str| section(&straight.join(f)).iter().map(|r| r[4]).sum::<f64>();
+    let (start, squeezed) = (
+        total("start_tine-plane.csv"),
+        total("end-of-squeeze-1_tine-plane.csv"),
+    );
+    assert!(
+        squeezed > 1.1 * start,
+        "section load {start} N at rest, {squeezed} N squeezed"
+    );
+    let plots = r.straight.join("plots");
+    let md = std::fs::read_to_string(r.straight.join("report.md")).unwrap();
+    for m in moments {
+        for p in planes {
+            let name = format!("section_{m}_{p}_load");
+            assert!(
+                md.contains(&format!("plots/{name}.png")),
+                "report.md lacks {name}"
+            );
+            figures::check(&plots, &name, &["z (m)", "log10 of the load carried (N)"]);
+        }
+    }
+    for p in planes {
+        let name = format!("section_end-of-squeeze-1_{p}_speed");
+        figures::check(&plots, &name, &["z (m)", "speed (m/s)"]);
+    }
+}

@@ -11,6 +11,7 @@
 //! * [`scene`]: the bodies of a track model and the paper's friction groups;
 //! * [`preparation`]: the deposited, cached ballast bed;
 //! * [`indicators`]: compacity, block heights, tine forces, coordination through a run;
+//! * [`sections`]: vertical sections through the bed at chosen moments (speed, load);
 //! * [`scenario`]: track scenario files and the `default` and `paper` presets.
 //!
 //! Conventions: SI units except sieve sizes, given in millimetres as in the standards; the
@@ -24,6 +25,7 @@ pub mod indicators;
 pub mod preparation;
 pub mod scenario;
 pub mod scene;
+pub mod sections;
 pub mod tamping;
 pub mod track;
 
