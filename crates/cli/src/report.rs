@@ -632,6 +632,88 @@ fn section_plots(dir: &Path, plots_dir: &Path, plots: &mut Plots) {
     }
 }
 
+/// The paper's question, what tamping one block does to its neighbours: the compacity under
+/// every block before tamping, after each tamped block's cycle (its withdrawal), and after
+/// the release, from the `series.csv` row at or just before each moment (`summary.json`'s
+/// `cycle` gives the moments). `None` for runs without blocks or cycle.
+fn cycle_table(summary: &Value, t: &Table) -> Option<String> {
+    let time = t.col("time_s")?;
+    let blocks: Vec<(usize, usize)> = (1..)
+        .map_while(|k| t.col(&format!("compacity_under_block_{k}")).map(|c| (k, c)))
+        .collect();
+    let cycles = summary.pointer("/cycle/blocks")?.as_array()?;
+    if blocks.is_empty() || t.rows.is_empty() {
+        return None;
+    }
+    let at = |when: f64| {
+        t.rows
+            .iter()
+            .take_while(|r| r[time] <= when + 1e-9)
+            .last()
+            .or(t.rows.first())
+    };
+    let first = &t.rows[0];
+    let mut moments: Vec<(String, &Vec<f64>)> =
+        vec![(format!("start (t = {} s)", sig(Some(first[time]))), first)];
+    for c in cycles {
+        let (Some(b), Some(end)) = (c["block"].as_u64(), c["end_s"].as_f64()) else {
+            continue;
+        };
+        let last = t.rows.last()?;
+        if last[time] + 1e-9 < end {
+            break;
+        }
+        moments.push((
+            format!("after tamping block {b} (t = {} s)", secs(end)),
+            at(end)?,
+        ));
+    }
+    if let (Some(release), Some(last)) = (num(summary, "/cycle/release_s"), t.rows.last()) {
+        if last[time] > release {
+            moments.push((
+                format!("end, after the release (t = {} s)", secs(last[time])),
+                last,
+            ));
+        }
+    }
+    let mut s = String::new();
+    let _ = writeln!(s, "## Compacity under each block, cycle by cycle\n");
+    let _ = write!(s, "| moment |");
+    for (k, _) in &blocks {
+        let _ = write!(s, " block {k} |");
+    }
+    let _ = write!(s, "\n|---|");
+    for _ in &blocks {
+        let _ = write!(s, "---:|");
+    }
+    let _ = writeln!(s);
+    for (i, (label, row)) in moments.iter().enumerate() {
+        let _ = write!(s, "| {label} |");
+        for &(_, c) in &blocks {
+            let (v, v0) = (row[c], first[c]);
+            let change = if i > 0 && v0 > 0.0 {
+                format!(" ({:+.1} %)", 100.0 * (v - v0) / v0)
+            } else {
+                String::new()
+            };
+            let _ = write!(s, " {}{change} |", sig(Some(v)));
+        }
+        let _ = writeln!(s);
+    }
+    let _ = writeln!(
+        s,
+        "\nSolid fraction in each block's control volume (its footprint, from the indicators' \
+         depth below the design soffit up to it); in brackets the change since the start."
+    );
+    Some(s)
+}
+
+/// A time for a table: to 0.1 ms, no trailing zeros.
+fn secs(t: f64) -> String {
+    let s = format!("{t:.4}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
 /// The text of `report.md`.
 fn report_markdown(
     scenario_file: &Path,
@@ -752,6 +834,12 @@ fn report_markdown(
     }
     row("state digest", format!("`{}`", text("/state_digest")));
     let _ = writeln!(s);
+
+    if let Some(t) = table {
+        if let Some(md) = cycle_table(summary, t) {
+            let _ = writeln!(s, "{md}");
+        }
+    }
 
     let _ = writeln!(s, "## Plots\n");
     if table.is_none() {
@@ -917,6 +1005,45 @@ mod tests {
     }
 
     use crate::charts::tests::check;
+
+    /// Three blocks tamped one after the other: the table takes each block's compacity at the
+    /// start, at the end of each block's cycle (the row at or just before it) and at the end
+    /// after the release, with the change since the start.
+    #[test]
+    fn cycle_table_gives_every_block_after_every_cycle() {
+        let mut text = String::from(
+            "step,time_s,compacity_under_block_1,compacity_under_block_2,compacity_under_block_3\n",
+        );
+        for k in 0..=100 {
+            let t = k as f64 * 0.01;
+            // Block j densifies linearly during its cycle [0.2 j, 0.2 j + 0.2] (j = 0, 1, 2).
+            let c = |j: f64| 0.5 + 0.05 * ((t - 0.2 * j - 0.1) / 0.2).clamp(0.0, 1.0);
+            let _ = writeln!(text, "{k},{t},{},{},{}", c(0.0), c(1.0), c(2.0));
+        }
+        let t = Table::parse(&text);
+        let cycle = |b: u64, end: f64| serde_json::json!({"block": b, "end_s": end});
+        let summary = serde_json::json!({"cycle": {
+            "blocks": [cycle(1, 0.305), cycle(2, 0.505), cycle(3, 0.705)],
+            "release_s": 0.705,
+        }});
+        let md = cycle_table(&summary, &t).unwrap();
+        let lines: Vec<&str> = md.lines().filter(|l| l.starts_with("| ")).collect();
+        assert_eq!(lines.len(), 6, "{md}");
+        assert!(lines[0].contains("block 1 | block 2 | block 3"), "{md}");
+        assert_eq!(lines[1], "| start (t = 0 s) | 0.5000 | 0.5000 | 0.5000 |");
+        // At 0.30 s (the row before 0.305 s) block 1 is done, block 2 not started.
+        assert_eq!(
+            lines[2],
+            "| after tamping block 1 (t = 0.305 s) | 0.5500 (+10.0 %) | 0.5000 (+0.0 %) | 0.5000 (+0.0 %) |"
+        );
+        assert!(lines[4].starts_with("| after tamping block 3 (t = 0.705 s) | 0.5500 (+10.0 %) | 0.5500 (+10.0 %) | 0.5500 (+10.0 %)"), "{md}");
+        assert!(
+            lines[5].starts_with("| end, after the release (t = 1 s)"),
+            "{md}"
+        );
+        // No cycle in the summary (an engine scenario): no table.
+        assert!(cycle_table(&serde_json::json!({}), &t).is_none());
+    }
 
     #[test]
     fn run_report_has_table_plots_and_indicators() {

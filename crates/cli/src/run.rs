@@ -62,6 +62,8 @@ struct TrackParts {
     indicators: Indicators,
     grains: usize,
     preparation: serde_json::Value,
+    /// When each tamped block's cycle happens (`summary.json`'s `cycle`).
+    cycle: serde_json::Value,
     sections: Sections,
 }
 
@@ -173,6 +175,7 @@ fn job(a: &RunArgs) -> Result<Job, String> {
                 grains: model.layout.grains.len(),
                 preparation: serde_json::to_value(&model.preparation).unwrap_or_default(),
                 indicators: model.indicators,
+                cycle: cycle_json(&model.cycle, &s.tamping.blocks),
                 sections,
             }),
             world: model.world,
@@ -353,6 +356,7 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
             .collect();
         map.insert("indicators".into(), finals.into());
         map.insert("preparation".into(), t.preparation.clone());
+        map.insert("cycle".into(), t.cycle.clone());
     }
     let json = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())?;
     write_atomic(&out.join("summary.json"), json.as_bytes()).map_err(io)?;
@@ -378,6 +382,33 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
         );
     }
     Ok(())
+}
+
+/// The moments of the tamping cycle, for the summary and the report: per tamped block (its
+/// 1-based number),
+/// the start of its insertion, squeeze, hold, withdrawal and the end of its cycle; the
+/// release and the duration (s).
+fn cycle_json(c: &ballast_railway::tamping::Cycle, blocks: &[usize]) -> serde_json::Value {
+    let per_block: Vec<serde_json::Value> = c
+        .phases
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            serde_json::json!({
+                "block": blocks.get(k).copied().unwrap_or(k + 1),
+                "insertion_s": p.insertion,
+                "squeeze_s": p.squeeze,
+                "hold_s": p.hold,
+                "withdraw_s": p.withdraw,
+                "end_s": p.end,
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "blocks": per_block,
+        "release_s": c.release,
+        "duration_s": c.duration,
+    })
 }
 
 /// Writes the sections due after step `k` into `out/sections/`.

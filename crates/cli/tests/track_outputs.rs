@@ -922,6 +922,17 @@ fn track_run_writes_sections_through_the_bed() {
             figures::check(&plots, &name, &["z (m)", "log10 of the load carried (N)"]);
         }
     }
+    // The cycle's moments in the summary, and the compacity table they give in the report.
+    let sum = summary(&r.straight).unwrap();
+    let cycle = r.scenario.tamping.build(track);
+    let end = sum["cycle"]["blocks"][0]["end_s"].as_f64().unwrap();
+    assert_eq!(sum["cycle"]["blocks"][0]["block"], 1);
+    assert!(close(end, cycle.phases[0].end, 1e-12), "{end}");
+    assert!(md.contains("## Compacity under each block, cycle by cycle"));
+    assert!(
+        md.contains("| after tamping block 1 (t = "),
+        "no row after block 1"
+    );
     for p in planes {
         let name = format!("section_end-of-squeeze-1_{p}_speed");
         figures::check(&plots, &name, &["z (m)", "speed (m/s)"]);

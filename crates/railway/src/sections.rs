@@ -102,7 +102,8 @@ impl Sections {
         dt: f64,
         steps: u64,
     ) -> Sections {
-        let block = tamped.first().copied().unwrap_or(0);
+        // Blocks are numbered from 1.
+        let block = tamped.first().copied().unwrap_or(1);
         let planes = vec![
             Plane {
                 name: "tine-plane".into(),
@@ -113,7 +114,7 @@ impl Sections {
                 name: "block-axis".into(),
                 label: format!(
                     "across the track through the axis of block {} (x = {:.3} m)",
-                    block + 1,
+                    block,
                     track.block_x(block)
                 ),
                 cut: Cut::AcrossTrack {
@@ -128,10 +129,10 @@ impl Sections {
             step: 1,
         }];
         for (k, p) in cycle.phases.iter().enumerate() {
-            let b = tamped.get(k).copied().unwrap_or(k);
+            let b = tamped.get(k).copied().unwrap_or(k + 1);
             moments.push(Moment {
                 name: format!("end-of-squeeze-{}", k + 1),
-                label: format!("the end of the squeeze of block {}", b + 1),
+                label: format!("the end of the squeeze of block {b}"),
                 step: step_of(p.hold),
             });
         }
