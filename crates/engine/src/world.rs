@@ -242,6 +242,17 @@ impl World {
         &self.solver_bodies
     }
 
+    /// The contact problem `(W, q, μ)` of the step being prepared (after [`World::prepare`]),
+    /// assembled from its local problems on the free velocities: a value to export, hand to
+    /// another solver, or solve with [`crate::solver::ContactProblem::solve_nlgs`].
+    pub fn contact_problem(&self) -> crate::solver::ContactProblem {
+        crate::solver::ContactProblem::assemble(
+            &self.locals,
+            &self.solver_bodies,
+            self.settings.dt * self.settings.theta,
+        )
+    }
+
     /// Steps 1–3 up to the local problems: detection at `qᵢ` with warm start, free velocities,
     /// local problems. Returns the largest overlap and the phase times so far.
     pub fn prepare(&mut self) -> (f64, PhaseTimes) {

@@ -17,6 +17,7 @@ pub mod delassus;
 pub mod drive;
 pub mod nlgs;
 pub mod partition;
+pub mod problem;
 
 pub use correction::CorrectionSettings;
 pub use ddm::DdmSettings;
@@ -24,6 +25,7 @@ pub use delassus::{LocalProblem, SolverBody};
 pub use drive::DriveRows;
 pub use nlgs::{Nlgs, SolveReport};
 pub use partition::{Balance, Partition};
+pub use problem::{BlockMatrix, ContactProblem};
 
 use serde::{Deserialize, Serialize};
 

@@ -1,0 +1,275 @@
+//! The contact problem of one step as a value: `(W, q, μ)`, as Siconos' `FrictionContactProblem`
+//! and the FCLIB collection (`fclib_local`) hold it.
+//!
+//! Mathematics. With the local impulses `r = (r_α)` and local velocities `u = (u_α)` (each in
+//! its contact frame `[n, t, s]`), the step's dynamics gives
+//!
+//! ```text
+//! u = W r + q,    W = Hᵀ M⁻¹ H,    q = Hᵀ V_free + (max(g_α, 0) / hθ) eₙ per contact,
+//! ```
+//!
+//! and each `(u_α, r_α)` obeys the Signorini-Coulomb law with `μ_α`. The shift of `q` is the
+//! engine's Signorini on the predicted gap (see [`super::nlgs::Nlgs`]): with it, the plain
+//! Signorini-Coulomb law on `(W, q, μ)` is the engine's law, so any solver of that standard
+//! problem (Siconos' and LMGC90's included) solves the step's contacts.
+//!
+//! `W` is assembled as a sparse symmetric matrix of 3×3 blocks: block `(α, β)` is
+//!
+//! ```text
+//! W_αβ = Σ_b s_αb s_βb E_αᵀ (m_b⁻¹ 1 − [r_αb×] I_b⁻¹ [r_βb×]) E_β
+//! ```
+//!
+//! over the bodies `b` that contacts α and β share and whose velocities impulses change
+//! (`s = −1` for a contact's first body, `+1` for its second; `r_αb` the lever arm). Force-limited
+//! drive rows are not part of this problem (FCLIB has no such rows): with drives, `q` is the
+//! free velocity of the contacts with the drive impulses left at zero.
+
+use super::delassus::{BodyAccess, LocalProblem, SolverBody};
+use super::nlgs::SolveReport;
+use super::{SolverSettings, StopRule};
+use crate::laws::coulomb::{natural_map_residual, solve_local_from};
+use crate::math::{skew, DMat3, DVec3};
+
+/// A sparse matrix of 3×3 blocks in compressed rows: row α holds the blocks
+/// `blocks[row_start[α]..row_start[α + 1]]` at block columns `cols[..]`, in increasing order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BlockMatrix {
+    /// Start of each block row in `cols` and `blocks` (length: rows + 1).
+    pub row_start: Vec<usize>,
+    /// Block column of each stored block.
+    pub cols: Vec<u32>,
+    /// The stored blocks.
+    pub blocks: Vec<DMat3>,
+}
+
+impl BlockMatrix {
+    /// Number of block rows.
+    pub fn rows(&self) -> usize {
+        self.row_start.len().saturating_sub(1)
+    }
+
+    /// Block `(i, j)`, if stored.
+    pub fn get(&self, i: usize, j: usize) -> Option<&DMat3> {
+        let range = self.row_start[i]..self.row_start[i + 1];
+        let k = self.cols[range.clone()].binary_search(&(j as u32)).ok()?;
+        Some(&self.blocks[range.start + k])
+    }
+
+    /// Block row `i`: `(column, block)` pairs.
+    pub fn row(&self, i: usize) -> impl Iterator<Item = (usize, &DMat3)> {
+        let range = self.row_start[i]..self.row_start[i + 1];
+        self.cols[range.clone()]
+            .iter()
+            .map(|&c| c as usize)
+            .zip(&self.blocks[range])
+    }
+
+    /// `Σ_j A_ij x_j` for row `i`.
+    #[inline]
+    pub fn row_dot(&self, i: usize, x: &[DVec3]) -> DVec3 {
+        self.row(i).map(|(j, b)| *b * x[j]).sum()
+    }
+
+    /// `A x`.
+    pub fn mul(&self, x: &[DVec3]) -> Vec<DVec3> {
+        (0..self.rows()).map(|i| self.row_dot(i, x)).collect()
+    }
+}
+
+/// The contact problem of one step (see the module documentation).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ContactProblem {
+    /// The Delassus operator `W` (symmetric, positive semi-definite).
+    pub w: BlockMatrix,
+    /// `q`: the free local velocities, shifted by the positive gaps (m/s).
+    pub q: Vec<DVec3>,
+    /// Friction coefficient per contact.
+    pub mu: Vec<f64>,
+    /// `‖Hᵀ V_free‖` (without the gap shift): the scale of the engine's relative
+    /// natural-map residual.
+    pub scale: f64,
+}
+
+/// Lever arm, sign and body of one side of a contact, for the assembly.
+#[derive(Clone, Copy)]
+struct Side {
+    contact: u32,
+    sign: f64,
+    arm: DVec3,
+}
+
+impl ContactProblem {
+    /// Assembles the problem of `locals` (the step's local problems) on the free velocities
+    /// `v_free` (the solver bodies before any impulse), with the gap-prediction factor
+    /// `h_theta = h θ`. Deterministic: blocks are summed in body order.
+    pub fn assemble(locals: &[LocalProblem], v_free: &[SolverBody], h_theta: f64) -> Self {
+        let n = locals.len();
+        // The contacts each writable body carries, in contact order.
+        let mut sides: Vec<Vec<Side>> = vec![Vec::new(); v_free.len()];
+        for (a, c) in locals.iter().enumerate() {
+            for (body, sign, arm, dynamic) in [
+                (c.body1, -1.0, c.r1, c.dynamic1),
+                (c.body2, 1.0, c.r2, c.dynamic2),
+            ] {
+                if dynamic {
+                    sides[body as usize].push(Side {
+                        contact: a as u32,
+                        sign,
+                        arm,
+                    });
+                }
+            }
+        }
+        let frames: Vec<DMat3> = locals
+            .iter()
+            .map(|c| {
+                let [n, t, s] = c.frame3();
+                DMat3::from_cols(n, t, s)
+            })
+            .collect();
+        let mut rows: Vec<Vec<(u32, DMat3)>> = vec![Vec::new(); n];
+        for (b, list) in sides.iter().enumerate() {
+            let body = &v_free[b];
+            let m_inv = DMat3::from_diagonal(DVec3::splat(body.inv_mass));
+            for x in list {
+                let ex = frames[x.contact as usize];
+                let left = ex.transpose();
+                for y in list {
+                    let ey = frames[y.contact as usize];
+                    let world = m_inv - skew(x.arm) * body.inv_inertia * skew(y.arm);
+                    let block = left * world * ey * (x.sign * y.sign);
+                    rows[x.contact as usize].push((y.contact, block));
+                }
+            }
+        }
+        let mut w = BlockMatrix {
+            row_start: Vec::with_capacity(n + 1),
+            ..BlockMatrix::default()
+        };
+        w.row_start.push(0);
+        for mut row in rows {
+            // Stable: two contributions to one block (contacts sharing both bodies) add in
+            // body order.
+            row.sort_by_key(|&(c, _)| c);
+            let mut last: Option<u32> = None;
+            for (c, block) in row {
+                if last == Some(c) {
+                    *w.blocks.last_mut().expect("a block was pushed") += block;
+                } else {
+                    w.cols.push(c);
+                    w.blocks.push(block);
+                    last = Some(c);
+                }
+            }
+            w.row_start.push(w.cols.len());
+        }
+        let free: Vec<DVec3> = locals.iter().map(|c| c.velocity(v_free)).collect();
+        let scale = free.iter().map(|u| u.length_squared()).sum::<f64>().sqrt();
+        let q = locals
+            .iter()
+            .zip(free)
+            .map(|(c, u)| {
+                if c.gap > 0.0 {
+                    DVec3::new(u.x + c.gap / h_theta, u.y, u.z)
+                } else {
+                    u
+                }
+            })
+            .collect();
+        ContactProblem {
+            w,
+            q,
+            mu: locals.iter().map(|c| c.mu).collect(),
+            scale,
+        }
+    }
+
+    /// Number of contacts.
+    pub fn len(&self) -> usize {
+        self.q.len()
+    }
+
+    /// Whether the problem has no contact.
+    pub fn is_empty(&self) -> bool {
+        self.q.is_empty()
+    }
+
+    /// `u = W r + q`.
+    pub fn velocity(&self, r: &[DVec3]) -> Vec<DVec3> {
+        self.w
+            .mul(r)
+            .into_iter()
+            .zip(&self.q)
+            .map(|(wr, q)| wr + *q)
+            .collect()
+    }
+
+    /// The engine's relative natural-map residual of `r` (per contact scaled by
+    /// `ρ_α = 1/W_nn,α`, over [`ContactProblem::scale`]).
+    pub fn residual(&self, r: &[DVec3]) -> f64 {
+        let u = self.velocity(r);
+        let sum: f64 = (0..self.len())
+            .map(|a| {
+                let wnn = self.w.get(a, a).map_or(0.0, |b| b.x_axis.x);
+                if wnn <= 0.0 {
+                    return 0.0;
+                }
+                let rho = 1.0 / wnn;
+                (natural_map_residual(r[a], u[a] * rho, self.mu[a]) / rho).powi(2)
+            })
+            .sum();
+        let scale = if self.scale > 0.0 { self.scale } else { 1.0 };
+        sum.sqrt() / scale
+    }
+
+    /// Non-Linear Gauss-Seidel on the assembled problem, contacts in order, from the impulses
+    /// in `r` (left there): the reference solver for a problem handed in from elsewhere, and a
+    /// cross-check of the engine's matrix-free sweep. Stops as the engine does (the stop norm
+    /// of `settings`, then the natural-map residual).
+    pub fn solve_nlgs(&self, r: &mut [DVec3], settings: &SolverSettings) -> SolveReport {
+        let n = self.len();
+        let mut report = SolveReport::default();
+        if n == 0 {
+            report.converged = true;
+            return report;
+        }
+        let diag: Vec<DMat3> = (0..n)
+            .map(|a| self.w.get(a, a).copied().unwrap_or(DMat3::ZERO))
+            .collect();
+        let mut stop = StopRule::new();
+        for k in 1..=settings.max_iterations {
+            let (mut dwr2, mut wr2) = (0.0, 0.0);
+            for a in 0..n {
+                let w = diag[a];
+                if w.x_axis.x <= 0.0 {
+                    // Two bodies that no impulse moves: nothing to solve.
+                    continue;
+                }
+                let u = self.w.row_dot(a, r) + self.q[a];
+                let uf = u - w * r[a];
+                let (rhat, _) = solve_local_from(&w, &w.inverse(), uf, self.mu[a], r[a]);
+                dwr2 += (w * (rhat - r[a])).length_squared();
+                wr2 += (w * rhat).length_squared();
+                r[a] = rhat;
+            }
+            report.iterations = k;
+            report.quad = if wr2 > 0.0 {
+                (dwr2 / wr2).sqrt()
+            } else {
+                dwr2.sqrt()
+            };
+            if stop.converged(settings, k, report.quad, || self.residual(r)) {
+                report.converged = true;
+                break;
+            }
+        }
+        report.residual = stop.final_residual(report.iterations, || self.residual(r));
+        report
+    }
+}
+
+/// `u = Hᵀ V` of every local problem at the velocities `v` (no gap shift): the matrix-free
+/// counterpart of [`ContactProblem::velocity`].
+pub fn local_velocities<B: BodyAccess + ?Sized>(locals: &[LocalProblem], v: &B) -> Vec<DVec3> {
+    locals.iter().map(|c| c.velocity(v)).collect()
+}

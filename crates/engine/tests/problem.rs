@@ -1,0 +1,181 @@
+//! The contact problem as a value (`World::contact_problem`): `W` assembled in 3×3 blocks is
+//! symmetric, positive semi-definite, has the local problems' blocks on its diagonal and gives
+//! the same local velocities as the engine's matrix-free `V = V_free + M⁻¹ H r`; NLGS on the
+//! assembled `(W, q, μ)` reproduces the engine's sweep, impulses and residual.
+
+use ballast_engine::bodies::{BodyKind, BodySet};
+use ballast_engine::laws::ContactStatus;
+use ballast_engine::laws::FrictionTable;
+use ballast_engine::math::{DMat3, DVec3};
+use ballast_engine::scenario::generate::GrainPack;
+use ballast_engine::solver::SolverSettings;
+use ballast_engine::world::{StepSettings, World};
+
+/// A pile of 80 grains poured in a box, 0.8 s later (settling), its next step prepared.
+fn prepared_pile() -> World {
+    let mut bodies = BodySet::default();
+    bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
+    for (p, n) in [
+        (DVec3::ZERO, DVec3::X),
+        (DVec3::new(0.15, 0.0, 0.0), -DVec3::X),
+        (DVec3::ZERO, DVec3::Y),
+        (DVec3::new(0.0, 0.15, 0.0), -DVec3::Y),
+    ] {
+        bodies.add_plane(p, n, 0);
+    }
+    let pack = GrainPack {
+        count: 80,
+        min: [0.0, 0.0, 0.002],
+        max_xy: [0.15, 0.15],
+        diameter: [0.025, 0.04],
+        vertices: [10, 14],
+        elongation: 1.3,
+        flatness: 1.1,
+        seed: 11,
+    };
+    for g in pack.build().unwrap() {
+        bodies.add_polyhedron(g, 2700.0, BodyKind::Dynamic, 1);
+    }
+    let settings = StepSettings {
+        dt: 5e-4,
+        solver: SolverSettings {
+            tolerance: 1e-3,
+            max_iterations: 200,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let mut w = World::new(bodies, FrictionTable::new(0.8), settings);
+    for _ in 0..1600 {
+        w.step();
+    }
+    w.prepare();
+    w
+}
+
+/// Seeded numbers in [-1, 1) (a linear congruential generator: the test needs no more).
+fn noise(seed: u64) -> impl FnMut() -> f64 {
+    let mut s = seed;
+    move || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((s >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+}
+
+/// Largest absolute entry.
+fn maxabs(m: DMat3) -> f64 {
+    m.to_cols_array()
+        .into_iter()
+        .fold(0.0, |a, x| a.max(x.abs()))
+}
+
+#[test]
+fn assembled_delassus_matches_the_matrix_free_operator() {
+    let w = prepared_pile();
+    let locals = w.local_problems();
+    let v_free = w.solver_bodies();
+    let p = w.contact_problem();
+    let n = p.len();
+    assert!(n > 100, "{n} contacts");
+    let norm =
+        p.w.blocks
+            .iter()
+            .map(|b| b.abs().to_cols_array().into_iter().fold(0.0, f64::max))
+            .fold(0.0, f64::max);
+    // Symmetric, with the local problems' blocks on the diagonal.
+    for i in 0..n {
+        for (j, b) in p.w.row(i) {
+            let t = p.w.get(j, i).expect("the transposed block is stored");
+            assert!(
+                maxabs(*b - t.transpose()) <= 1e-12 * norm,
+                "W[{i},{j}] is not W[{j},{i}]ᵀ"
+            );
+        }
+        let d = p.w.get(i, i).unwrap();
+        assert!(maxabs(*d - locals[i].w.to_mat()) <= 1e-12 * norm);
+    }
+    let off = p.w.blocks.len() - n;
+    eprintln!("{n} contacts, {off} off-diagonal blocks");
+    assert!(
+        off > n,
+        "the grains' contacts couple: {off} off-diagonal blocks"
+    );
+    // `W r + q` against `V = V_free + M⁻¹ H r` read back at each contact (plus the gap shift).
+    let h_theta = w.settings.dt * w.settings.theta;
+    let mut rand = noise(7);
+    for _ in 0..3 {
+        let r: Vec<DVec3> = (0..n)
+            .map(|_| DVec3::new(rand(), rand(), rand()) * 1e-3)
+            .collect();
+        let u = p.velocity(&r);
+        let mut v = v_free.to_vec();
+        for (c, ri) in locals.iter().zip(&r) {
+            c.apply(&mut v[..], *ri);
+        }
+        let mut worst = 0.0f64;
+        let scale = u.iter().map(|x| x.length()).fold(0.0, f64::max);
+        for (a, c) in locals.iter().enumerate() {
+            let mut m = c.velocity(&v[..]);
+            if c.gap > 0.0 {
+                m.x += c.gap / h_theta;
+            }
+            worst = worst.max((m - u[a]).length());
+        }
+        assert!(
+            worst <= 1e-12 * scale,
+            "matrix-free vs assembled: {worst:e} of {scale:e}"
+        );
+        // Positive semi-definite: rᵀ W r ≥ 0 (to rounding).
+        let wr = p.w.mul(&r);
+        let quad: f64 = r.iter().zip(&wr).map(|(a, b)| a.dot(*b)).sum();
+        let r2: f64 = r.iter().map(|x| x.length_squared()).sum();
+        assert!(quad >= -1e-12 * norm * r2, "rᵀWr = {quad:e}");
+    }
+}
+
+#[test]
+fn nlgs_on_the_assembled_problem_reproduces_the_engine_sweep() {
+    let w = prepared_pile();
+    let settings = SolverSettings {
+        tolerance: 1e-300,
+        max_iterations: 40,
+        residual_tolerance: f64::INFINITY,
+        ..Default::default()
+    };
+    let mut nlgs = w.nlgs();
+    nlgs.settings = settings.clone();
+    let p = w.contact_problem();
+    // The engine: matrix-free sweeps from the warm start.
+    let mut locals = w.local_problems().to_vec();
+    let mut v = w.solver_bodies().to_vec();
+    let mut status = vec![ContactStatus::NoContact; locals.len()];
+    let engine = nlgs.solve(&mut locals, &mut v, &mut status);
+    // The same sweeps on (W, q, μ) from the same warm start.
+    let mut r: Vec<DVec3> = w.local_problems().iter().map(|c| c.r).collect();
+    let assembled = p.solve_nlgs(&mut r, &settings);
+    assert_eq!(engine.iterations, assembled.iterations);
+    let big = r.iter().map(|x| x.length()).fold(0.0, f64::max);
+    let diff = locals
+        .iter()
+        .zip(&r)
+        .map(|(c, x)| (c.r - *x).length())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "largest impulse {big:.3e}, largest difference {diff:.3e}; residual engine {:.6e}, assembled {:.6e}",
+        engine.residual, assembled.residual
+    );
+    assert!(big > 0.0);
+    assert!(
+        diff <= 1e-9 * big,
+        "impulses differ by {diff:e} (largest {big:e})"
+    );
+    assert!(
+        (engine.residual - assembled.residual).abs() <= 1e-6 * engine.residual,
+        "residual {} vs {}",
+        engine.residual,
+        assembled.residual
+    );
+    assert!((p.residual(&r) - assembled.residual).abs() <= 1e-12 * assembled.residual.max(1e-300));
+}
