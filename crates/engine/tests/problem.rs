@@ -85,7 +85,7 @@ fn assembled_delassus_matches_the_matrix_free_operator() {
             .map(|b| b.abs().to_cols_array().into_iter().fold(0.0, f64::max))
             .fold(0.0, f64::max);
     // Symmetric, with the local problems' blocks on the diagonal.
-    for i in 0..n {
+    for (i, local) in locals.iter().enumerate() {
         for (j, b) in p.w.row(i) {
             let t = p.w.get(j, i).expect("the transposed block is stored");
             assert!(
@@ -94,7 +94,7 @@ fn assembled_delassus_matches_the_matrix_free_operator() {
             );
         }
         let d = p.w.get(i, i).unwrap();
-        assert!(maxabs(*d - locals[i].w.to_mat()) <= 1e-12 * norm);
+        assert!(maxabs(*d - local.w.to_mat()) <= 1e-12 * norm);
     }
     let off = p.w.blocks.len() - n;
     eprintln!("{n} contacts, {off} off-diagonal blocks");
