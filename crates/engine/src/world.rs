@@ -117,6 +117,8 @@ pub struct World {
     /// Per body, the body whose velocities it takes in the solver (itself, or the body it is
     /// attached to); empty when no body is attached.
     attach: Vec<u32>,
+    /// A preparation made by [`World::detect`] that the next [`World::step`] solves.
+    pending: Option<(f64, PhaseTimes)>,
 }
 
 impl World {
@@ -149,6 +151,7 @@ impl World {
             ddm_workspace: ddm::DdmWorkspace::default(),
             drives: Vec::new(),
             attach: Vec::new(),
+            pending: None,
         }
         .with_attached_velocities()
     }
@@ -240,6 +243,23 @@ impl World {
     /// The solver bodies (free velocities after [`World::prepare`]).
     pub fn solver_bodies(&self) -> &[SolverBody] {
         &self.solver_bodies
+    }
+
+    /// The first phase of a step on its own (LMGC90's ChiPy style): detection at `qᵢ` with
+    /// warm start, free velocities and local problems, kept for the next [`World::step`],
+    /// which then solves and integrates without detecting again. Between the two the step's
+    /// contacts ([`World::local_problems`], [`World::contact_problem`]) can be read. Calling it
+    /// again before the step does nothing. Returns the largest overlap (m).
+    pub fn detect(&mut self) -> f64 {
+        if self.pending.is_none() {
+            self.pending = Some(self.prepare());
+        }
+        self.pending.map_or(0.0, |p| p.0)
+    }
+
+    /// Whether [`World::detect`] has prepared the next step.
+    pub fn is_detected(&self) -> bool {
+        self.pending.is_some()
     }
 
     /// The contact problem `(W, q, μ)` of the step being prepared (after [`World::prepare`]),
@@ -352,7 +372,10 @@ impl World {
 
     /// Advances one time step.
     pub fn step(&mut self) -> StepReport {
-        let (max_penetration, mut times) = self.prepare();
+        let (max_penetration, mut times) = match self.pending.take() {
+            Some(p) => p,
+            None => self.prepare(),
+        };
         let deepest = self
             .contacts
             .gap

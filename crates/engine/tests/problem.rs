@@ -179,3 +179,25 @@ fn nlgs_on_the_assembled_problem_reproduces_the_engine_sweep() {
     );
     assert!((p.residual(&r) - assembled.residual).abs() <= 1e-12 * assembled.residual.max(1e-300));
 }
+
+/// `detect()` then `step()` is one step: the same state digest as `step()` alone, and the
+/// contact problem read in between is the one the step solves.
+#[test]
+fn detect_then_step_is_one_step() {
+    let mut a = prepared_pile();
+    let mut b = prepared_pile();
+    for _ in 0..3 {
+        a.step();
+        let overlap = b.detect();
+        assert!(b.is_detected() && overlap >= 0.0);
+        let n = b.contact_problem().len();
+        assert_eq!(b.detect(), overlap, "a second detect does nothing");
+        let r = b.step();
+        assert!(!b.is_detected());
+        assert_eq!(r.contacts, n);
+        assert_eq!(
+            ballast_engine::digest::state_digest(&a.bodies),
+            ballast_engine::digest::state_digest(&b.bodies)
+        );
+    }
+}
