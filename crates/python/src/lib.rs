@@ -1,0 +1,457 @@
+//! `ballast._ballast`: the compiled core of the Python package `ballast` (see
+//! `python/ballast/__init__.py` for the public API and its documentation). A thin front end
+//! over the engine's and the railway crate's library API, like the CLI: scenarios in, steps
+//! (with the GIL released), arrays, contact problems and summaries out.
+
+use ballast_engine::digest::state_digest;
+use ballast_engine::laws::ContactStatus;
+use ballast_engine::math::DVec3;
+use ballast_engine::output::checkpoint::{read_checkpoint_with_stats, write_checkpoint_with_stats};
+use ballast_engine::output::{RunStats, Summary};
+use ballast_engine::scenario::Scenario;
+use ballast_engine::solver::{BlockMatrix, ContactProblem, ConvergenceNorm, SolverSettings};
+use ballast_engine::world::World;
+use ballast_railway::indicators::Indicators;
+use ballast_railway::{is_track_scenario, TrackScenario};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyReadonlyArray3, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyIOError, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::{Path, PathBuf};
+
+/// A scenario's error as Python's `ValueError`, with the engine's message (it names the
+/// field, the value and what is allowed).
+fn value_error(e: impl ToString) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// `(n, 3)` array of vectors.
+fn vec3_array<'py>(py: Python<'py>, v: &[DVec3]) -> Bound<'py, PyArray2<f64>> {
+    let flat: Vec<f64> = v.iter().flat_map(|x| x.to_array()).collect();
+    flat.into_pyarray(py)
+        .reshape([v.len(), 3])
+        .expect("n × 3 elements")
+}
+
+/// A simulation: a world stepping through a scenario (engine scenario or track scenario).
+#[pyclass(module = "ballast._ballast")]
+struct Simulation {
+    world: World,
+    stats: RunStats,
+    /// Track runs: the indicators of `series.csv`.
+    indicators: Option<Indicators>,
+    /// The resolved scenario (what `scenario.toml` of a CLI run holds).
+    scenario: String,
+}
+
+/// Builds a simulation from scenario text.
+fn build(text: &str, cache: Option<&Path>) -> PyResult<Simulation> {
+    if is_track_scenario(text) {
+        let s = TrackScenario::from_toml(text).map_err(value_error)?;
+        let model = s.build(cache, &mut |_| {}).map_err(value_error)?;
+        Ok(Simulation {
+            world: model.world,
+            stats: RunStats::default(),
+            indicators: Some(model.indicators),
+            scenario: s.to_toml(),
+        })
+    } else {
+        let s = Scenario::from_toml(text).map_err(|e| value_error(e.0))?;
+        let world = s.build().map_err(|e| value_error(e.0))?;
+        Ok(Simulation {
+            world,
+            stats: RunStats::default(),
+            indicators: None,
+            scenario: text.to_string(),
+        })
+    }
+}
+
+/// `base` with every key of `over` set over it, table by table.
+fn overlay(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => overlay(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+#[pymethods]
+impl Simulation {
+    /// A simulation from scenario text, or from the path of a scenario file.
+    #[staticmethod]
+    #[pyo3(signature = (text_or_path, cache = None))]
+    fn from_toml(text_or_path: &str, cache: Option<PathBuf>) -> PyResult<Self> {
+        let path = Path::new(text_or_path);
+        let text = if !text_or_path.contains('\n') && path.is_file() {
+            std::fs::read_to_string(path)
+                .map_err(|e| PyIOError::new_err(format!("cannot read {text_or_path}: {e}")))?
+        } else {
+            text_or_path.to_string()
+        };
+        build(&text, cache.as_deref())
+    }
+
+    /// A built-in track scenario (`default`, `paper`) with `overlay` (TOML text) set over it.
+    #[staticmethod]
+    #[pyo3(signature = (preset = "default", cache = None, overlay_toml = ""))]
+    fn track(preset: &str, cache: Option<PathBuf>, overlay_toml: &str) -> PyResult<Self> {
+        let base = TrackScenario::preset(preset).map_err(value_error)?;
+        let mut table: toml::Table = toml::from_str(&base.to_toml()).map_err(value_error)?;
+        let over: toml::Table = toml::from_str(overlay_toml)
+            .map_err(|e| value_error(format!("overrides: {e}")))?;
+        overlay(&mut table, over);
+        let text = toml::to_string(&table).map_err(value_error)?;
+        build(&text, cache.as_deref())
+    }
+
+    /// Advances `n` steps with the GIL released; `progress(step_index, time)` is called
+    /// (with the GIL) every `every` steps.
+    #[pyo3(signature = (n = 1, progress = None, every = 100))]
+    fn step(
+        &mut self,
+        py: Python<'_>,
+        n: u64,
+        progress: Option<Py<PyAny>>,
+        every: u64,
+    ) -> PyResult<()> {
+        let every = every.max(1);
+        let mut done = 0;
+        while done < n {
+            let chunk = (n - done).min(every);
+            let (world, stats) = (&mut self.world, &mut self.stats);
+            py.detach(|| {
+                for _ in 0..chunk {
+                    let r = world.step();
+                    stats.add(&r);
+                }
+            });
+            done += chunk;
+            if let Some(f) = &progress {
+                f.call1(py, (self.world.step_index, self.world.time))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Simulated time (s).
+    #[getter]
+    fn time(&self) -> f64 {
+        self.world.time
+    }
+
+    /// Steps done.
+    #[getter]
+    fn step_index(&self) -> u64 {
+        self.world.step_index
+    }
+
+    /// Number of bodies.
+    #[getter]
+    fn body_count(&self) -> usize {
+        self.world.bodies.len()
+    }
+
+    /// Time step (s).
+    #[getter]
+    fn dt(&self) -> f64 {
+        self.world.settings.dt
+    }
+
+    /// The resolved scenario (TOML).
+    #[getter]
+    fn scenario(&self) -> String {
+        self.scenario.clone()
+    }
+
+    /// Hash of every body's position, orientation and velocities (as in `summary.json`).
+    fn state_digest(&self) -> String {
+        state_digest(&self.world.bodies)
+    }
+
+    /// The keys of `summary.json`, as JSON text.
+    fn summary_json(&self) -> PyResult<String> {
+        let s = Summary::new(&self.world, &self.stats, rayon_threads());
+        serde_json::to_string(&s).map_err(|e| PyRuntimeError::new_err(e.to_string()))
+    }
+
+    /// Body centres, `(N, 3)` (m).
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        vec3_array(py, &self.world.bodies.position)
+    }
+
+    /// Body orientations as unit quaternions `(x, y, z, w)` (scalar last), `(N, 4)`.
+    #[getter]
+    fn orientations<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let q = &self.world.bodies.orientation;
+        let flat: Vec<f64> = q.iter().flat_map(|q| q.to_array()).collect();
+        flat.into_pyarray(py)
+            .reshape([q.len(), 4])
+            .expect("n × 4 elements")
+    }
+
+    /// Body velocities, `(N, 3)` (m/s).
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        vec3_array(py, &self.world.bodies.velocity)
+    }
+
+    /// Body angular velocities (world frame), `(N, 3)` (rad/s).
+    #[getter]
+    fn angular_velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        vec3_array(py, &self.world.bodies.angular_velocity)
+    }
+
+    /// Body masses (kg; `inf` for bodies without one: fixed bodies and planes).
+    #[getter]
+    fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let b = &self.world.bodies;
+        let m: Vec<f64> = b
+            .inv_mass
+            .iter()
+            .map(|&im| if im > 0.0 { 1.0 / im } else { f64::INFINITY })
+            .collect();
+        m.into_pyarray(py)
+    }
+
+    /// Body kinds: `"dynamic"`, `"kinematic"` or `"fixed"`.
+    #[getter]
+    fn kinds(&self) -> Vec<String> {
+        self.world
+            .bodies
+            .kind
+            .iter()
+            .map(|k| format!("{k:?}").to_lowercase())
+            .collect()
+    }
+
+    /// Body friction groups.
+    #[getter]
+    fn groups<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u32>> {
+        self.world.bodies.group.clone().into_pyarray(py)
+    }
+
+    /// The contacts of the last step (or of the step detected by `detect()`): arrays
+    /// `body1`, `body2`, `point`, `normal`, `gap`, `impulse` (local frame `(n, t, s)`, N·s),
+    /// `status` (0 open, 1 stick, 2 slide).
+    fn contacts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let c = &self.world.contacts;
+        let d = PyDict::new(py);
+        d.set_item("body1", c.body1.clone().into_pyarray(py))?;
+        d.set_item("body2", c.body2.clone().into_pyarray(py))?;
+        d.set_item("point", vec3_array(py, &c.point))?;
+        let normals: Vec<DVec3> = c.frame.iter().map(|f| f[0]).collect();
+        d.set_item("normal", vec3_array(py, &normals))?;
+        d.set_item("gap", c.gap.clone().into_pyarray(py))?;
+        d.set_item("impulse", vec3_array(py, &c.impulse))?;
+        let status: Vec<u8> = c
+            .status
+            .iter()
+            .map(|s| match s {
+                ContactStatus::NoContact => 0,
+                ContactStatus::Stick => 1,
+                ContactStatus::Slide => 2,
+            })
+            .collect();
+        d.set_item("status", status.into_pyarray(py))?;
+        Ok(d)
+    }
+
+    /// Detects the next step's contacts and builds its local problems (the step's first
+    /// phase); the next `step()` solves them. Returns the largest overlap (m).
+    fn detect(&mut self) -> f64 {
+        self.world.detect()
+    }
+
+    /// The contact problem of the next step (detected first if needed): block-sparse `W`
+    /// (`indptr`, `indices`, `blocks` of shape `(nnzb, 3, 3)`), `q` `(n, 3)`, `mu` `(n,)`,
+    /// `scale` (`‖Hᵀ V_free‖`).
+    fn contact_problem<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        self.world.detect();
+        let p = self.world.contact_problem();
+        problem_dict(py, &p)
+    }
+
+    /// The track indicators (the columns `series.csv` adds) at the current state.
+    fn indicators<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let Some(ind) = &self.indicators else {
+            return Err(PyValueError::new_err(
+                "indicators: this simulation is not a track scenario (no [track] table)",
+            ));
+        };
+        let d = PyDict::new(py);
+        for (name, v) in ind.names().iter().zip(ind.values(&self.world)) {
+            d.set_item(name, v)?;
+        }
+        Ok(d)
+    }
+
+    /// Writes a checkpoint (atomic) from which `resume` continues bit-identically.
+    fn checkpoint(&self, path: PathBuf) -> PyResult<()> {
+        if self.world.is_detected() {
+            return Err(PyRuntimeError::new_err(
+                "checkpoint: a step is detected but not solved; call step() first",
+            ));
+        }
+        write_checkpoint_with_stats(&self.world, Some(&self.stats), &path)
+            .map_err(|e| PyIOError::new_err(format!("checkpoint {}: {e}", path.display())))
+    }
+
+    /// Reads a checkpoint written by `checkpoint` into this simulation, which must be built
+    /// from the same scenario.
+    fn load_checkpoint(&mut self, path: PathBuf) -> PyResult<()> {
+        let stats = read_checkpoint_with_stats(&path, &mut self.world)
+            .map_err(|e| value_error(format!("checkpoint {}: {e}", path.display())))?;
+        self.stats = stats.unwrap_or_default();
+        Ok(())
+    }
+}
+
+/// The worker threads steps use.
+fn rayon_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+fn problem_dict<'py>(py: Python<'py>, p: &ContactProblem) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let indptr: Vec<i64> = p.w.row_start.iter().map(|&x| x as i64).collect();
+    let indices: Vec<i64> = p.w.cols.iter().map(|&x| i64::from(x)).collect();
+    let flat: Vec<f64> = p
+        .w
+        .blocks
+        .iter()
+        // Row-major 3×3 blocks (glam stores columns).
+        .flat_map(|b| b.transpose().to_cols_array())
+        .collect();
+    let nb = p.w.blocks.len();
+    d.set_item("indptr", indptr.into_pyarray(py))?;
+    d.set_item("indices", indices.into_pyarray(py))?;
+    d.set_item(
+        "blocks",
+        flat.into_pyarray(py)
+            .reshape([nb, 3, 3])
+            .expect("nnzb × 3 × 3 elements"),
+    )?;
+    d.set_item("q", vec3_array(py, &p.q))?;
+    d.set_item("mu", p.mu.clone().into_pyarray(py))?;
+    d.set_item("scale", p.scale)?;
+    Ok(d)
+}
+
+/// NLGS on a contact problem `(W, q, μ)` given as block-sparse rows: returns `(r, u,
+/// iterations, residual, converged)`.
+#[pyfunction]
+#[pyo3(signature = (indptr, indices, blocks, q, mu, tolerance, max_iterations, r0 = None))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn solve_fc3d_blocks<'py>(
+    py: Python<'py>,
+    indptr: PyReadonlyArray1<'py, i64>,
+    indices: PyReadonlyArray1<'py, i64>,
+    blocks: PyReadonlyArray3<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    mu: PyReadonlyArray1<'py, f64>,
+    tolerance: f64,
+    max_iterations: usize,
+    r0: Option<PyReadonlyArray2<'py, f64>>,
+) -> PyResult<(
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<f64>>,
+    usize,
+    f64,
+    bool,
+)> {
+    let n = q.shape()[0];
+    let vec3s = |a: &PyReadonlyArray2<'py, f64>, name: &str| -> PyResult<Vec<DVec3>> {
+        if a.shape().len() != 2 || a.shape()[1] != 3 || a.shape()[0] != n {
+            return Err(value_error(format!(
+                "{name}: shape {:?}, expected ({n}, 3)",
+                a.shape()
+            )));
+        }
+        let s = a.as_slice().map_err(value_error)?;
+        Ok(s.chunks_exact(3)
+            .map(|c| DVec3::new(c[0], c[1], c[2]))
+            .collect())
+    };
+    let qv = vec3s(&q, "q")?;
+    let mu = mu.as_slice().map_err(value_error)?.to_vec();
+    let ptr: Vec<usize> = indptr
+        .as_slice()
+        .map_err(value_error)?
+        .iter()
+        .map(|&x| x as usize)
+        .collect();
+    let cols: Vec<u32> = indices
+        .as_slice()
+        .map_err(value_error)?
+        .iter()
+        .map(|&x| x as u32)
+        .collect();
+    let b = blocks.as_slice().map_err(value_error)?;
+    if mu.len() != n || ptr.len() != n + 1 || ptr.last() != Some(&cols.len()) {
+        return Err(value_error(format!(
+            "W: {} block rows and {} stored blocks for {n} contacts and {} coefficients",
+            ptr.len().saturating_sub(1),
+            cols.len(),
+            mu.len()
+        )));
+    }
+    if b.len() != 9 * cols.len() || cols.iter().any(|&c| c as usize >= n) {
+        return Err(value_error("W: blocks must have shape (nnzb, 3, 3), columns < n"));
+    }
+    let blocks: Vec<ballast_engine::math::DMat3> = b
+        .chunks_exact(9)
+        .map(|m| ballast_engine::math::DMat3::from_cols_array(&m.try_into().expect("9")).transpose())
+        .collect();
+    let scale = qv.iter().map(|x| x.length_squared()).sum::<f64>().sqrt();
+    let problem = ContactProblem {
+        w: BlockMatrix {
+            row_start: ptr,
+            cols,
+            blocks,
+        },
+        q: qv,
+        mu,
+        scale,
+    };
+    let mut r = match &r0 {
+        Some(a) => vec3s(a, "r0")?,
+        None => vec![DVec3::ZERO; n],
+    };
+    let settings = SolverSettings {
+        tolerance,
+        residual_tolerance: tolerance,
+        max_iterations: max_iterations.max(1),
+        norm: ConvergenceNorm::NaturalMap,
+        ..Default::default()
+    };
+    let report = py.detach(|| problem.solve_nlgs(&mut r, &settings));
+    let u = problem.velocity(&r);
+    Ok((
+        vec3_array(py, &r),
+        vec3_array(py, &u),
+        report.iterations,
+        report.residual,
+        report.converged,
+    ))
+}
+
+/// The TOML of a built-in track scenario.
+#[pyfunction]
+fn preset_toml(name: &str) -> PyResult<String> {
+    Ok(TrackScenario::preset(name).map_err(value_error)?.to_toml())
+}
+
+#[pymodule]
+fn _ballast(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Simulation>()?;
+    m.add_function(wrap_pyfunction!(solve_fc3d_blocks, m)?)?;
+    m.add_function(wrap_pyfunction!(preset_toml, m)?)?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

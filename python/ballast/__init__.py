@@ -1,0 +1,238 @@
+"""ballast: Non-Smooth Contact Dynamics of railway ballast, scripted from Python.
+
+The time loop is yours, as in LMGC90's ChiPy or a YADE script::
+
+    import ballast
+    sim = ballast.Simulation.from_toml("examples/pile.toml")
+    sim.step(100)                       # the GIL is released while it runs
+    print(sim.time, sim.positions.shape, sim.summary()["solver"])
+
+    track = ballast.Simulation.track("default", cache="~/.cache/ballast",
+                                     tamping={"frequency": 30.0})
+    track.step(50)
+    print(track.indicators()["compacity_under_block_1"])
+
+A step's phases: ``sim.detect()`` (contacts and local problems of the next step),
+``sim.contact_problem()`` (its ``(W, q, mu)``), ``sim.step()`` (solve and integrate). Any
+contact problem ``u = W r + q`` with Signorini-Coulomb friction can be solved with
+:func:`solve_fc3d` (ballast's NLGS).
+
+Units are SI. Arrays are copies (changing them does not change the simulation).
+"""
+
+import json
+import os
+
+import numpy as np
+
+from ._ballast import Simulation as _Core
+from ._ballast import __version__, preset_toml
+from ._ballast import solve_fc3d_blocks as _solve_blocks
+
+__all__ = ["Simulation", "solve_fc3d", "preset_toml", "__version__"]
+
+
+def _toml_value(key, v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        if v != v:
+            return "nan"
+        if v in (float("inf"), float("-inf")):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_toml_value(key, x) for x in v) + "]"
+    raise TypeError(f"{key} = {v!r}: a number, a boolean, a string or a list of them")
+
+
+def _overlay_toml(overrides):
+    """``table={"key": value}`` keyword arguments as TOML text."""
+    lines = []
+    for table, values in overrides.items():
+        if not isinstance(values, dict):
+            raise TypeError(
+                f"{table} = {values!r}: give a table as a dict, e.g. "
+                f"{table}={{'key': value}}"
+            )
+        lines.append(f"[{table}]")
+        for k, v in values.items():
+            lines.append(f"{k} = {_toml_value(f'{table}.{k}', v)}")
+    return "\n".join(lines) + "\n"
+
+
+def _cache(cache):
+    return None if cache is None else os.path.expanduser(os.fspath(cache))
+
+
+class Simulation:
+    """A simulation: bodies, contacts and a clock stepping through a scenario."""
+
+    def __init__(self, core):
+        self._core = core
+
+    @classmethod
+    def from_toml(cls, text_or_path, cache=None):
+        """From scenario text or a scenario file (an engine scenario, or a track scenario with
+        a ``[track]`` table, prepared or read from ``cache``). Raises ``ValueError`` naming
+        the field, the value and what is allowed."""
+        return cls(_Core.from_toml(os.fspath(text_or_path), _cache(cache)))
+
+    @classmethod
+    def track(cls, preset="default", cache=None, **overrides):
+        """A built-in track scenario (``"default"``: one block, its 4 tines, the paper's cycle;
+        ``"paper"``: 7 blocks) with tables overridden, e.g.
+        ``tamping={"squeeze_force": 5000.0}, simulation={"dt": 4e-4}``."""
+        return cls(_Core.track(preset, _cache(cache), _overlay_toml(overrides)))
+
+    @classmethod
+    def resume(cls, path, scenario, cache=None):
+        """The simulation of ``scenario`` (text or file) continued from the checkpoint at
+        ``path``: stepping on gives bit-identically what the run that wrote it would have."""
+        sim = cls.from_toml(scenario, cache)
+        sim._core.load_checkpoint(os.fspath(path))
+        return sim
+
+    def step(self, n=1, progress=None, every=100):
+        """Advances ``n`` steps, with the GIL released (other Python threads run meanwhile);
+        ``progress(step_index, time)`` is called every ``every`` steps."""
+        self._core.step(int(n), progress, int(every))
+
+    @property
+    def time(self):
+        """Simulated time (s)."""
+        return self._core.time
+
+    @property
+    def step_index(self):
+        """Steps done."""
+        return self._core.step_index
+
+    @property
+    def dt(self):
+        """Time step (s)."""
+        return self._core.dt
+
+    @property
+    def scenario(self):
+        """The resolved scenario (TOML text)."""
+        return self._core.scenario
+
+    def state_digest(self):
+        """Hash of every body's state: equal digests, equal runs."""
+        return self._core.state_digest()
+
+    def summary(self):
+        """The keys of the CLI's ``summary.json`` for the steps run so far."""
+        return json.loads(self._core.summary_json())
+
+    @property
+    def positions(self):
+        """Body centres, ``(N, 3)``."""
+        return self._core.positions
+
+    @property
+    def orientations(self):
+        """Unit quaternions ``(x, y, z, w)``, scalar last, ``(N, 4)``."""
+        return self._core.orientations
+
+    @property
+    def velocities(self):
+        """``(N, 3)`` (m/s)."""
+        return self._core.velocities
+
+    @property
+    def angular_velocities(self):
+        """World frame, ``(N, 3)`` (rad/s)."""
+        return self._core.angular_velocities
+
+    @property
+    def masses(self):
+        """``(N,)`` (kg; ``inf`` for bodies without a mass: fixed bodies and planes)."""
+        return self._core.masses
+
+    @property
+    def kinds(self):
+        """``"dynamic"``, ``"kinematic"`` or ``"fixed"`` per body."""
+        return self._core.kinds
+
+    @property
+    def groups(self):
+        """Friction group per body, ``(N,)``."""
+        return self._core.groups
+
+    @property
+    def contacts(self):
+        """Contacts of the last step: ``body1``, ``body2``, ``point`` ``(n, 3)``, ``normal``
+        ``(n, 3)``, ``gap``, ``impulse`` ``(n, 3)`` in the contact frame ``(n, t, s)`` (N·s),
+        ``status`` (0 open, 1 stick, 2 slide)."""
+        return self._core.contacts()
+
+    def detect(self):
+        """Detects the next step's contacts (its first phase); ``step()`` then solves them.
+        Returns the largest overlap (m)."""
+        return self._core.detect()
+
+    def contact_problem(self):
+        """The next step's contact problem ``u = W r + q`` (Signorini-Coulomb with ``mu``):
+        a dict with ``W`` (``scipy.sparse.bsr_matrix`` of 3×3 blocks when scipy is
+        installed, else ``None``), its parts ``indptr``, ``indices``, ``blocks``, ``q``
+        ``(n, 3)``, ``mu`` ``(n,)`` and ``scale`` (the norm the residual is relative to)."""
+        p = self._core.contact_problem()
+        p["W"] = _bsr(p)
+        return p
+
+    def indicators(self):
+        """Track runs: compacity, block heights, tine forces, … at the current state."""
+        return self._core.indicators()
+
+    def checkpoint(self, path):
+        """Writes a checkpoint (atomically) to ``path``; see :meth:`resume`."""
+        self._core.checkpoint(os.fspath(path))
+
+
+def _bsr(p):
+    try:
+        import scipy.sparse as sp
+    except ImportError:
+        return None
+    n = len(p["mu"])
+    return sp.bsr_matrix((p["blocks"], p["indices"], p["indptr"]), shape=(3 * n, 3 * n))
+
+
+def solve_fc3d(W, q, mu, tolerance=1e-8, max_iterations=1000, r0=None):
+    """Solves ``u = W r + q`` with Signorini-Coulomb friction at every contact (3 rows per
+    contact, frame ``(n, t, s)``) by ballast's Non-Linear Gauss-Seidel, stopped at a relative
+    natural-map residual of ``tolerance``.
+
+    ``W``: a scipy sparse matrix (converted to 3×3 blocks) or a dict with ``indptr``,
+    ``indices``, ``blocks`` (as :meth:`Simulation.contact_problem` gives); ``q`` of shape
+    ``(n, 3)`` or ``(3n,)``. Returns ``(r, u, info)``: ``r`` and ``u`` of shape ``(n, 3)``,
+    ``info`` with ``converged``, ``iterations`` and ``residual``."""
+    q = np.ascontiguousarray(np.asarray(q, dtype=np.float64).reshape(-1, 3))
+    mu = np.ascontiguousarray(np.asarray(mu, dtype=np.float64).reshape(-1))
+    if isinstance(W, dict):
+        indptr, indices, blocks = W["indptr"], W["indices"], W["blocks"]
+    else:
+        b = W.tobsr(blocksize=(3, 3))
+        b.sort_indices()
+        indptr, indices, blocks = b.indptr, b.indices, b.data
+    if r0 is not None:
+        r0 = np.ascontiguousarray(np.asarray(r0, dtype=np.float64).reshape(-1, 3))
+    r, u, iterations, residual, converged = _solve_blocks(
+        np.ascontiguousarray(indptr, dtype=np.int64),
+        np.ascontiguousarray(indices, dtype=np.int64),
+        np.ascontiguousarray(blocks, dtype=np.float64),
+        q,
+        mu,
+        float(tolerance),
+        int(max_iterations),
+        r0,
+    )
+    info = {"converged": bool(converged), "iterations": int(iterations), "residual": residual}
+    return r, u, info

@@ -1,0 +1,223 @@
+"""The Python API (`import ballast`) against physics and against the CLI.
+
+Run from the repository root after `pip install .`: `python3 -m pytest tests/python`.
+"""
+
+import json
+import math
+import os
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import ballast
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+G = 9.81
+
+
+def block_on_slab(mu, tilt_deg, dt=1e-3, steps=10):
+    """A 0.1 m cube resting on a fixed slab under gravity tilted by `tilt_deg` about y: the
+    inclined-plane problem with the plane horizontal."""
+    a = math.radians(tilt_deg)
+    gx, gz = G * math.sin(a), -G * math.cos(a)
+    return f"""
+[simulation]
+dt = {dt}
+steps = {steps}
+gravity = [{gx!r}, 0.0, {gz!r}]
+
+[solver]
+tolerance = 1e-10
+residual_tolerance = 1e-10
+max_iterations = 2000
+norm = "natural_map"
+
+[correction]
+fraction = 0.0
+
+[materials]
+stone = 2700
+
+[friction]
+default = {mu}
+
+[[body]]
+shape = "box"
+kind = "fixed"
+group = "slab"
+half_extents = [1.0, 1.0, 0.1]
+center = [0, 0, -0.1]
+
+[[body]]
+shape = "box"
+group = "block"
+material = "stone"
+half_extents = [0.05, 0.05, 0.05]
+center = [0, 0, 0.05]
+"""
+
+
+def test_block_sticks_below_the_friction_angle():
+    sim = ballast.Simulation.from_toml(block_on_slab(mu=0.5, tilt_deg=20.0))
+    x0 = sim.positions[1].copy()
+    sim.step(200)
+    # tan 20° = 0.36 < 0.5: the block stays.
+    assert np.abs(sim.positions[1] - x0).max() < 1e-9
+    assert np.abs(sim.velocities[1]).max() < 1e-9
+
+
+def test_block_slides_with_the_analytic_acceleration():
+    mu, tilt = 0.2, 30.0
+    sim = ballast.Simulation.from_toml(block_on_slab(mu=mu, tilt_deg=tilt))
+    sim.step(300)
+    a = math.radians(tilt)
+    acc = G * (math.sin(a) - mu * math.cos(a))
+    v = sim.velocities[1]
+    # The velocity grows by a h per step exactly (the θ-scheme integrates a constant force).
+    assert v[0] == pytest.approx(acc * sim.time, rel=1e-6)
+    assert abs(v[2]) < 1e-9 and abs(v[1]) < 1e-12
+
+
+def test_arrays_have_shapes_dtypes_and_the_summary_keys():
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "sliding_block.toml"))
+    sim.step(20)
+    n = 3
+    assert sim.step_index == 20 and sim.time == pytest.approx(20 * sim.dt)
+    for name, shape in [
+        ("positions", (n, 3)),
+        ("velocities", (n, 3)),
+        ("angular_velocities", (n, 3)),
+        ("orientations", (n, 4)),
+        ("masses", (n,)),
+        ("groups", (n,)),
+    ]:
+        a = getattr(sim, name)
+        assert a.shape == shape, name
+    assert sim.positions.dtype == np.float64 and sim.groups.dtype == np.uint32
+    assert np.allclose(np.linalg.norm(sim.orientations, axis=1), 1.0)
+    assert sim.kinds == ["fixed", "dynamic", "kinematic"]
+    assert sim.masses[1] == pytest.approx(2700 * 0.1**3)
+    s = sim.summary()
+    for key in ["steps", "time", "bodies", "solver", "contacts", "state_digest"]:
+        assert key in s
+    assert s["steps"] == 20 and s["state_digest"] == sim.state_digest()
+    c = sim.contacts
+    k = len(c["gap"])
+    assert k > 0 and c["point"].shape == (k, 3) and c["impulse"].shape == (k, 3)
+    assert set(np.unique(c["status"])) <= {0, 1, 2}
+
+
+def test_the_same_run_as_the_cli(tmp_path):
+    exe = os.path.join(ROOT, "target", "release", "ballast")
+    if not os.path.exists(exe):
+        subprocess.run(["cargo", "build", "--release", "-p", "ballast-cli"], cwd=ROOT, check=True)
+    scenario = os.path.join(ROOT, "examples", "sliding_block.toml")
+    out = tmp_path / "run"
+    subprocess.run(
+        [exe, "run", scenario, "--out", str(out), "--steps", "300", "--quiet", "--threads", "1"],
+        check=True,
+    )
+    cli = json.loads((out / "summary.json").read_text())
+    sim = ballast.Simulation.from_toml(scenario)
+    sim.step(300)
+    assert sim.state_digest() == cli["state_digest"]
+    assert sim.summary()["solver"]["mean_iterations"] == cli["solver"]["mean_iterations"]
+
+
+def test_step_releases_the_gil():
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+    ticks = []
+    stop = threading.Event()
+
+    def other():
+        while not stop.is_set():
+            ticks.append(time.perf_counter())
+            time.sleep(0.001)
+
+    t = threading.Thread(target=other)
+    t.start()
+    time.sleep(0.01)
+    start = time.perf_counter()
+    sim.step(3000, every=10000)
+    end = time.perf_counter()
+    stop.set()
+    t.join()
+    during = [x for x in ticks if start < x < end]
+    # Held GIL: no tick during the call. Released: about one per millisecond.
+    assert end - start > 0.05
+    assert len(during) > 10, f"{len(during)} ticks in {end - start:.3f} s"
+
+
+def test_progress_is_called():
+    sim = ballast.Simulation.from_toml(block_on_slab(mu=0.5, tilt_deg=0.0))
+    seen = []
+    sim.step(25, progress=lambda k, t: seen.append((k, t)), every=10)
+    assert [k for k, _ in seen] == [10, 20, 25]
+
+
+def test_checkpoint_and_resume_are_bit_identical(tmp_path):
+    scenario = os.path.join(ROOT, "examples", "pile.toml")
+    a = ballast.Simulation.from_toml(scenario)
+    a.step(150)
+    a.checkpoint(tmp_path / "k.bin")
+    a.step(100)
+    b = ballast.Simulation.resume(tmp_path / "k.bin", scenario)
+    assert b.step_index == 150
+    b.step(100)
+    assert a.state_digest() == b.state_digest()
+
+
+def test_contact_problem_of_a_resting_block_gives_its_weight():
+    sim = ballast.Simulation.from_toml(block_on_slab(mu=0.5, tilt_deg=0.0))
+    sim.step(50)
+    p = sim.contact_problem()
+    n = len(p["mu"])
+    assert n >= 4 and p["q"].shape == (n, 3) and p["blocks"].shape[1:] == (3, 3)
+    W = p["W"]
+    assert W.shape == (3 * n, 3 * n)
+    assert abs(W - W.T).max() <= 1e-12 * abs(W).max()
+    r, u, info = ballast.solve_fc3d(W, p["q"], p["mu"], tolerance=1e-10, max_iterations=5000)
+    assert info["converged"], info
+    weight = 2700 * 0.1**3 * G * sim.dt
+    assert r[:, 0].sum() == pytest.approx(weight, rel=1e-8)
+    assert np.abs(u[:, 0]).max() < 1e-9
+    # The step then solves the same problem: its impulses carry the same weight.
+    sim.step()
+    assert sim.contacts["impulse"][:, 0].sum() == pytest.approx(weight, rel=1e-8)
+
+
+def test_solve_fc3d_on_a_hand_made_problem():
+    # One contact, W = I: r = −q projected on the cone (here inside it: stick).
+    W = {"indptr": np.array([0, 1]), "indices": np.array([0]), "blocks": np.eye(3)[None]}
+    r, u, info = ballast.solve_fc3d(W, [-1.0, 0.2, 0.0], [0.5], tolerance=1e-12)
+    assert info["converged"]
+    assert r[0] == pytest.approx([1.0, -0.2, 0.0])
+    assert u[0] == pytest.approx([0.0, 0.0, 0.0], abs=1e-15)
+    # Slide: |q_t| large, the impulse on the cone's edge opposing q_t.
+    r, u, info = ballast.solve_fc3d(W, [-1.0, 2.0, 0.0], [0.5], tolerance=1e-12)
+    assert r[0] == pytest.approx([1.0, -0.5, 0.0])
+
+
+@pytest.mark.parametrize(
+    "text, field",
+    [
+        (block_on_slab(0.5, 0.0).replace("dt = 0.001", "dt = -1"), "simulation.dt"),
+        (block_on_slab(0.5, 0.0).replace("default = 0.5", "default = -2"), "friction"),
+        ("[track]\nblocks = 0\n", "track.blocks"),
+        ('[track]\n[simulation]\ndt = "fast"\n', "dt"),
+    ],
+)
+def test_bad_input_raises_with_the_field_named(text, field):
+    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+        ballast.Simulation.from_toml(text)
+
+
+def test_bad_overrides_raise():
+    with pytest.raises(ValueError, match="tamping.frequency"):
+        ballast.Simulation.track(tamping={"frequency": -1.0})
+    with pytest.raises(TypeError, match="tamping"):
+        ballast.Simulation.track(tamping=3)
