@@ -29,7 +29,7 @@ from ._ballast import Simulation as _Core
 from ._ballast import __version__, preset_toml
 from ._ballast import solve_fc3d_blocks as _solve_blocks
 
-__all__ = ["Simulation", "solve_fc3d", "preset_toml", "__version__"]
+__all__ = ["Simulation", "solve_fc3d", "write_fclib", "read_fclib", "preset_toml", "__version__"]
 
 
 def _toml_value(key, v):
@@ -236,3 +236,72 @@ def solve_fc3d(W, q, mu, tolerance=1e-8, max_iterations=1000, r0=None):
     )
     info = {"converged": bool(converged), "iterations": int(iterations), "residual": residual}
     return r, u, info
+
+
+def write_fclib(path, problem, title="ballast contact problem", description="", solution=None):
+    """Writes a contact problem (a dict with ``W``, ``q``, ``mu``, as
+    :meth:`Simulation.contact_problem` gives) in FCLIB's HDF5 layout (``/fclib_local``: ``W`` in
+    compressed rows, ``vectors/q``, ``vectors/mu``, ``spacedim`` = 3, ``info``; a
+    ``solution`` dict with ``r`` and ``u`` goes to ``/solution``), the format of the
+    Siconos/LMGC90 benchmark collection. Needs ``h5py`` and ``scipy``."""
+    import h5py
+    import scipy.sparse as sp
+
+    W = problem["W"] if problem.get("W") is not None else _bsr(problem)
+    W = sp.csr_matrix(W)
+    W.sort_indices()
+    q = np.asarray(problem["q"], dtype=np.float64).reshape(-1)
+    mu = np.asarray(problem["mu"], dtype=np.float64).reshape(-1)
+    if W.shape != (q.size, q.size) or q.size != 3 * mu.size:
+        raise ValueError(f"W {W.shape}, q {q.size}, mu {mu.size}: W must be 3n × 3n, q 3n, mu n")
+    with h5py.File(os.fspath(path), "w") as f:
+        g = f.create_group("fclib_local")
+        g["spacedim"] = np.array([3], dtype=np.int32)
+        w = g.create_group("W")
+        for k, v in [("nzmax", W.nnz), ("m", W.shape[0]), ("n", W.shape[1]), ("nz", -2)]:
+            w[k] = np.array([v], dtype=np.int32)
+        w["p"] = W.indptr.astype(np.int32)
+        w["i"] = W.indices.astype(np.int32)
+        w["x"] = W.data.astype(np.float64)
+        v = g.create_group("vectors")
+        v["q"] = q
+        v["mu"] = mu
+        info = g.create_group("info")
+        info["title"] = title
+        info["description"] = description
+        info["math_info"] = "u = W r + q, Signorini-Coulomb per contact, frame (n, t, s)"
+        if solution is not None:
+            s = f.create_group("solution")
+            for k in ("r", "u"):
+                if k in solution:
+                    s[k] = np.asarray(solution[k], dtype=np.float64).reshape(-1)
+
+
+def read_fclib(path):
+    """Reads an FCLIB local problem: a dict with ``W`` (``scipy.sparse.csr_matrix``), ``q``
+    ``(n, 3)``, ``mu``, and ``solution`` (``r``, ``u`` as ``(n, 3)``) when the file has one.
+    Compressed rows, columns and triplets are read."""
+    import h5py
+    import scipy.sparse as sp
+
+    with h5py.File(os.fspath(path), "r") as f:
+        if "fclib_local" not in f:
+            raise ValueError(f"{path}: no /fclib_local group (not an FCLIB local problem)")
+        g = f["fclib_local"]
+        w = g["W"]
+        m, n, nz = int(w["m"][0]), int(w["n"][0]), int(w["nz"][0])
+        p, i, x = w["p"][()], w["i"][()], w["x"][()]
+        if nz == -2:
+            W = sp.csr_matrix((x, i, p), shape=(m, n))
+        elif nz == -1:
+            W = sp.csc_matrix((x, i, p), shape=(m, n)).tocsr()
+        else:
+            W = sp.coo_matrix((x[:nz], (i[:nz], p[:nz])), shape=(m, n)).tocsr()
+        out = {
+            "W": W,
+            "q": g["vectors"]["q"][()].reshape(-1, 3),
+            "mu": g["vectors"]["mu"][()],
+        }
+        if "solution" in f:
+            out["solution"] = {k: f["solution"][k][()].reshape(-1, 3) for k in f["solution"]}
+        return out

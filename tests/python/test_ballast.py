@@ -221,3 +221,27 @@ def test_bad_overrides_raise():
         ballast.Simulation.track(tamping={"frequency": -1.0})
     with pytest.raises(TypeError, match="tamping"):
         ballast.Simulation.track(tamping=3)
+
+
+def test_fclib_round_trip(tmp_path):
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+    sim.step(600)
+    p = sim.contact_problem()
+    r, u, info = ballast.solve_fc3d(p["W"], p["q"], p["mu"], tolerance=1e-6, max_iterations=3000)
+    path = tmp_path / "pile.hdf5"
+    ballast.write_fclib(path, p, solution={"r": r, "u": u})
+    back = ballast.read_fclib(path)
+    assert (back["W"] != p["W"].tocsr()).nnz == 0
+    assert np.array_equal(back["q"], p["q"]) and np.array_equal(back["mu"], p["mu"])
+    assert np.array_equal(back["solution"]["r"], r)
+    # The problem read back is the same problem: the same solve gives the same impulses.
+    r2, _, info2 = ballast.solve_fc3d(back["W"], back["q"], back["mu"], tolerance=1e-6,
+                                      max_iterations=3000)
+    assert info2["iterations"] == info["iterations"]
+    assert np.allclose(r2, r, rtol=0, atol=1e-12 * np.abs(r).max())
+    import h5py
+
+    with h5py.File(path) as f:
+        assert f["fclib_local/spacedim"][0] == 3
+        assert f["fclib_local/W/nz"][0] == -2
+        assert f["fclib_local/W/m"][0] == 3 * len(p["mu"])
