@@ -114,6 +114,11 @@ class Simulation:
         return self._core.step_index
 
     @property
+    def steps(self):
+        """The scenario's step count (a track scenario: its whole tamping cycle)."""
+        return self._core.steps
+
+    @property
     def dt(self):
         """Time step (s)."""
         return self._core.dt
@@ -182,10 +187,28 @@ class Simulation:
         """The next step's contact problem ``u = W r + q`` (Signorini-Coulomb with ``mu``):
         a dict with ``W`` (``scipy.sparse.bsr_matrix`` of 3×3 blocks when scipy is
         installed, else ``None``), its parts ``indptr``, ``indices``, ``blocks``, ``q``
-        ``(n, 3)``, ``mu`` ``(n,)`` and ``scale`` (the norm the residual is relative to)."""
+        ``(n, 3)``, ``mu`` ``(n,)`` and ``scale`` (the norm the residual is relative to).
+
+        Its global form (FCLIB's ``fclib_global``, Siconos' ``GlobalFrictionContactProblem``)
+        over the ``bodies`` the contacts move (world indices, 6 velocities each: linear then
+        angular): ``v = v_free + M_inv H r``, ``u = H.T v + b``, so ``W = H.T M_inv H`` and
+        ``q = H.T v_free + b`` (``b``: the driven and fixed bodies' motion and the gap shift).
+        ``H`` ``(6 nb, 3 n)``, ``M`` (masses, world inertia tensors) and ``M_inv`` (the
+        solver's: zero on a degree of freedom a drive imposes) are scipy sparse matrices,
+        ``v_free`` ``(6 nb,)``; their parts ``H_blocks``, ``H_body``, ``H_contact``, ``mass``,
+        ``inertia``, ``inv_mass``, ``inv_inertia`` are in the dict too."""
         p = self._core.contact_problem()
         p["W"] = _bsr(p)
+        p.update(_global(p))
+        p["v_free"] = p["v_free"].reshape(-1)
         return p
+
+    def write_vtk(self, dir):
+        """Writes the current state as a frame of the ParaView series in ``dir``
+        (``grains.pvd``, ``bodies.pvd``, ``contacts.pvd``, ``dir/vtk/*.vtu``: the layout of a
+        CLI run). Successive calls on one folder add frames; a folder written before keeps its
+        frames up to the current time."""
+        self._core.write_vtk(os.fspath(dir))
 
     def indicators(self):
         """Track runs: compacity, block heights, tine forces, … at the current state."""
@@ -203,6 +226,32 @@ def _bsr(p):
         return None
     n = len(p["mu"])
     return sp.bsr_matrix((p["blocks"], p["indices"], p["indptr"]), shape=(3 * n, 3 * n))
+
+
+def _global(p):
+    """``H``, ``M`` and ``M_inv`` as scipy sparse matrices (None without scipy)."""
+    try:
+        import scipy.sparse as sp
+    except ImportError:
+        return {"H": None, "M": None, "M_inv": None}
+    n, nb = len(p["mu"]), len(p["bodies"])
+    blocks, body, contact = p["H_blocks"], p["H_body"], p["H_contact"]
+    i, j = np.meshgrid(np.arange(6), np.arange(3), indexing="ij")
+    rows = (6 * body[:, None, None] + i[None]).ravel()
+    cols = (3 * contact[:, None, None] + j[None]).ravel()
+    H = sp.csr_matrix((blocks.ravel(), (rows, cols)), shape=(6 * nb, 3 * n))
+
+    def block_diag(lin, rot):
+        b = np.zeros((nb, 6, 6))
+        b[:, 0, 0] = b[:, 1, 1] = b[:, 2, 2] = lin
+        b[:, 3:, 3:] = rot
+        return sp.bsr_matrix((b, np.arange(nb), np.arange(nb + 1)), shape=(6 * nb, 6 * nb))
+
+    return {
+        "H": H,
+        "M": block_diag(p["mass"], p["inertia"]),
+        "M_inv": block_diag(p["inv_mass"], p["inv_inertia"]),
+    }
 
 
 def solve_fc3d(W, q, mu, tolerance=1e-8, max_iterations=1000, r0=None):

@@ -6,6 +6,7 @@ Run from the repository root after `pip install .`: `python3 -m pytest tests/pyt
 import json
 import math
 import os
+import re
 import subprocess
 import threading
 import time
@@ -245,3 +246,70 @@ def test_fclib_round_trip(tmp_path):
         assert f["fclib_local/spacedim"][0] == 3
         assert f["fclib_local/W/nz"][0] == -2
         assert f["fclib_local/W/m"][0] == 3 * len(p["mu"])
+
+
+def test_global_form_of_the_contact_problem():
+    # A settling pile: grains against each other and against the box's fixed walls.
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+    sim.step(400)
+    p = sim.contact_problem()
+    n, nb = len(p["mu"]), len(p["bodies"])
+    H, M, M_inv, W = p["H"], p["M"], p["M_inv"], p["W"]
+    assert H.shape == (6 * nb, 3 * n) and M.shape == (6 * nb, 6 * nb)
+    assert p["v_free"].shape == (6 * nb,)
+    # W = Hᵀ M⁻¹ H (the grains are free bodies: M⁻¹ is M's inverse).
+    W2 = (H.T @ M_inv @ H).toarray()
+    assert np.abs(W.toarray() - W2).max() <= 1e-12 * np.abs(W2).max()
+    assert np.abs((M @ M_inv).toarray() - np.eye(6 * nb)).max() < 1e-9
+    # q = Hᵀ v_free + b, where b is the gap shift alone against the fixed walls.
+    q = p["q"].reshape(-1)
+    assert np.abs(H.T @ p["v_free"] + p["b"].reshape(-1) - q).max() <= 1e-12 * np.abs(q).max()
+    # The masses are the bodies' own, and v_free is their velocity plus g h.
+    assert np.array_equal(p["mass"], sim.masses[p["bodies"]])
+    v = sim.velocities[p["bodies"]]
+    vf = p["v_free"].reshape(nb, 6)
+    assert np.abs(vf[:, :3] - (v + np.array([0, 0, -G]) * sim.dt)).max() < 1e-12
+
+
+def test_write_vtk_frames_read_back(tmp_path):
+    meshio = pytest.importorskip("meshio")
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+    out = tmp_path / "frames"
+    for _ in range(3):
+        sim.step(50)
+        sim.write_vtk(out)
+    pvd = (out / "grains.pvd").read_text()
+    assert pvd.count("<DataSet") == 3
+    times = [float(t) for t in re.findall(r'timestep="([^"]+)"', pvd)]
+    assert times == pytest.approx([50 * sim.dt, 100 * sim.dt, 150 * sim.dt], rel=1e-12)
+    last = sorted((out / "vtk").glob("grains_*.vtu"))[-1]
+    m = meshio.read(last)
+    ids = np.concatenate([c for c in m.cell_data["id"]])
+    vel = np.concatenate([c for c in m.cell_data["velocity"]])
+    dynamic = [i for i, k in enumerate(sim.kinds) if k == "dynamic"]
+    assert set(ids.tolist()) == set(dynamic)
+    assert np.abs(vel - sim.velocities[ids]).max() == 0.0
+    # A new Simulation writing into the folder keeps the frames up to its time.
+    again = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+    again.step(100)
+    again.write_vtk(out)
+    assert (out / "grains.pvd").read_text().count("<DataSet") == 2
+
+
+def test_the_frequency_study_example_draws_its_figure(tmp_path):
+    pytest.importorskip("matplotlib")
+    script = os.path.join(ROOT, "examples", "python", "frequency_study.py")
+    out = tmp_path / "study.png"
+    # Two frequencies, the first 40 steps of the cycle each (the lift): a quick look.
+    done = subprocess.run(
+        ["python3", script, "--out", str(out), "--cache", str(tmp_path / "cache"),
+         "--frequencies", "20,50", "--steps", "40"],
+        capture_output=True, text=True, check=True,
+    )
+    lines = [l for l in done.stdout.splitlines() if " Hz: " in l]
+    assert len(lines) == 2, done.stdout
+    # The lift alone leaves the bed under the block as it was (within a percent).
+    for l in lines:
+        gain = float(re.search(r"block ([+-][0-9.]+) %", l).group(1))
+        assert abs(gain) < 1.0, l
+    assert out.stat().st_size > 10_000 and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

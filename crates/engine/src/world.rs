@@ -273,6 +273,15 @@ impl World {
         )
     }
 
+    /// The global form `(M, H, v_free, b)` of [`World::contact_problem`]'s problem `problem`
+    /// (see [`crate::solver::GlobalProblem`]).
+    pub fn global_problem(
+        &self,
+        problem: &crate::solver::ContactProblem,
+    ) -> crate::solver::GlobalProblem {
+        crate::solver::GlobalProblem::assemble(&self.locals, &self.solver_bodies, problem)
+    }
+
     /// Steps 1–3 up to the local problems: detection at `qᵢ` with warm start, free velocities,
     /// local problems. Returns the largest overlap and the phase times so far.
     pub fn prepare(&mut self) -> (f64, PhaseTimes) {

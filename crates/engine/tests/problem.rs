@@ -201,3 +201,49 @@ fn detect_then_step_is_one_step() {
         );
     }
 }
+
+#[test]
+fn global_form_gives_w_and_q_through_the_bodies() {
+    let w = prepared_pile();
+    let p = w.contact_problem();
+    let g = w.global_problem(&p);
+    let n = p.len();
+    // The grains in contact are the problem's bodies; the planes are not.
+    assert!(g.bodies.len() > 30, "{} bodies", g.bodies.len());
+    assert!(g.bodies.windows(2).all(|x| x[0] < x[1]));
+    assert!(g.bodies.iter().all(|&b| b >= 5), "a plane is not moved");
+    // Each contact has one block per grain: two between grains, one against a wall.
+    let walls = w
+        .local_problems()
+        .iter()
+        .filter(|c| !(c.dynamic1 && c.dynamic2))
+        .count();
+    assert_eq!(g.h.len(), 2 * n - walls);
+    // W = Hᵀ M⁻¹ H.
+    let norm =
+        p.w.blocks
+            .iter()
+            .map(|b| b.abs().to_cols_array().into_iter().fold(0.0, f64::max))
+            .fold(0.0, f64::max);
+    let mut rand = noise(3);
+    let r: Vec<DVec3> = (0..n).map(|_| DVec3::new(rand(), rand(), rand())).collect();
+    let via_bodies = g.w_times(&r);
+    let assembled = p.w.mul(&r);
+    let r_max = r.iter().map(|x| x.length()).fold(0.0, f64::max);
+    for (a, b) in via_bodies.iter().zip(&assembled) {
+        assert!(
+            (*a - *b).length() <= 1e-12 * norm * r_max * 8.0,
+            "Hᵀ M⁻¹ H r = {a} but W r = {b}"
+        );
+    }
+    // The walls are fixed, so q − Hᵀ v_free is the gap shift alone.
+    let h_theta = w.settings.dt * w.settings.theta;
+    let q_max = p.q.iter().map(|x| x.length()).fold(0.0, f64::max);
+    for (c, b) in w.local_problems().iter().zip(&g.b) {
+        let shift = DVec3::new(c.gap.max(0.0) / h_theta, 0.0, 0.0);
+        assert!(
+            (*b - shift).length() <= 1e-12 * q_max,
+            "b = {b}, gap shift {shift}"
+        );
+    }
+}

@@ -7,6 +7,7 @@ use ballast_engine::digest::state_digest;
 use ballast_engine::laws::ContactStatus;
 use ballast_engine::math::DVec3;
 use ballast_engine::output::checkpoint::{read_checkpoint_with_stats, write_checkpoint_with_stats};
+use ballast_engine::output::vtk::VtkWriter;
 use ballast_engine::output::{RunStats, Summary};
 use ballast_engine::scenario::Scenario;
 use ballast_engine::solver::{BlockMatrix, ContactProblem, ConvergenceNorm, SolverSettings};
@@ -43,6 +44,10 @@ struct Simulation {
     indicators: Option<Indicators>,
     /// The resolved scenario (what `scenario.toml` of a CLI run holds).
     scenario: String,
+    /// The scenario's step count (a track scenario: its whole cycle).
+    steps: u64,
+    /// The ParaView series `write_vtk` last wrote, and its folder.
+    vtk: Option<(PathBuf, VtkWriter)>,
 }
 
 /// Builds a simulation from scenario text.
@@ -55,6 +60,8 @@ fn build(text: &str, cache: Option<&Path>) -> PyResult<Simulation> {
             stats: RunStats::default(),
             indicators: Some(model.indicators),
             scenario: s.to_toml(),
+            steps: s.steps(),
+            vtk: None,
         })
     } else {
         let s = Scenario::from_toml(text).map_err(|e| value_error(e.0))?;
@@ -64,6 +71,8 @@ fn build(text: &str, cache: Option<&Path>) -> PyResult<Simulation> {
             stats: RunStats::default(),
             indicators: None,
             scenario: text.to_string(),
+            steps: s.steps(),
+            vtk: None,
         })
     }
 }
@@ -102,8 +111,8 @@ impl Simulation {
     fn track(preset: &str, cache: Option<PathBuf>, overlay_toml: &str) -> PyResult<Self> {
         let base = TrackScenario::preset(preset).map_err(value_error)?;
         let mut table: toml::Table = toml::from_str(&base.to_toml()).map_err(value_error)?;
-        let over: toml::Table = toml::from_str(overlay_toml)
-            .map_err(|e| value_error(format!("overrides: {e}")))?;
+        let over: toml::Table =
+            toml::from_str(overlay_toml).map_err(|e| value_error(format!("overrides: {e}")))?;
         overlay(&mut table, over);
         let text = toml::to_string(&table).map_err(value_error)?;
         build(&text, cache.as_deref())
@@ -154,6 +163,12 @@ impl Simulation {
     #[getter]
     fn body_count(&self) -> usize {
         self.world.bodies.len()
+    }
+
+    /// The scenario's step count (a track scenario: its whole cycle).
+    #[getter]
+    fn steps(&self) -> u64 {
+        self.steps
     }
 
     /// Time step (s).
@@ -270,11 +285,86 @@ impl Simulation {
 
     /// The contact problem of the next step (detected first if needed): block-sparse `W`
     /// (`indptr`, `indices`, `blocks` of shape `(nnzb, 3, 3)`), `q` `(n, 3)`, `mu` `(n,)`,
-    /// `scale` (`‖Hᵀ V_free‖`).
+    /// `scale` (`‖Hᵀ V_free‖`); and its global form (see `GlobalProblem`): `bodies` `(nb,)`,
+    /// `mass` `(nb,)` and `inertia` `(nb, 3, 3)` (world frame), the solver's `inv_mass` and
+    /// `inv_inertia` (zero on a degree of freedom a drive imposes), `v_free` `(nb, 6)`,
+    /// `H` as blocks `H_blocks` `(nh, 6, 3)` at `H_body`, `H_contact`, and `b` `(n, 3)`.
     fn contact_problem<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         self.world.detect();
         let p = self.world.contact_problem();
-        problem_dict(py, &p)
+        let d = problem_dict(py, &p)?;
+        let g = self.world.global_problem(&p);
+        let b = &self.world.bodies;
+        let nb = g.bodies.len();
+        let mat_array = |ms: Vec<ballast_engine::math::DMat3>| {
+            let k = ms.len();
+            let flat: Vec<f64> = ms
+                .iter()
+                .flat_map(|m| m.transpose().to_cols_array())
+                .collect();
+            flat.into_pyarray(py)
+                .reshape([k, 3, 3])
+                .expect("k × 3 × 3 elements")
+        };
+        let ids: Vec<i64> = g.bodies.iter().map(|&i| i64::from(i)).collect();
+        d.set_item("bodies", ids.into_pyarray(py))?;
+        let mass: Vec<f64> = g.bodies.iter().map(|&i| b.mass(i as usize)).collect();
+        d.set_item("mass", mass.into_pyarray(py))?;
+        d.set_item(
+            "inertia",
+            mat_array(
+                g.bodies
+                    .iter()
+                    .map(|&i| b.inertia_world(i as usize))
+                    .collect(),
+            ),
+        )?;
+        d.set_item("inv_mass", g.inv_mass.clone().into_pyarray(py))?;
+        d.set_item("inv_inertia", mat_array(g.inv_inertia.clone()))?;
+        let vf: Vec<f64> = g
+            .v_free
+            .iter()
+            .flat_map(|[v, w]| v.to_array().into_iter().chain(w.to_array()))
+            .collect();
+        d.set_item(
+            "v_free",
+            vf.into_pyarray(py).reshape([nb, 6]).expect("nb × 6"),
+        )?;
+        let nh = g.h.len();
+        let hb: Vec<f64> =
+            g.h.iter()
+                .flat_map(|h| {
+                    // Rows: force x y z, torque x y z; columns: n, t, s.
+                    let (f, t) = (h.force.transpose(), h.torque.transpose());
+                    f.to_cols_array().into_iter().chain(t.to_cols_array())
+                })
+                .collect();
+        d.set_item(
+            "H_blocks",
+            hb.into_pyarray(py).reshape([nh, 6, 3]).expect("nh × 6 × 3"),
+        )?;
+        let hbody: Vec<i64> = g.h.iter().map(|h| i64::from(h.body)).collect();
+        let hcontact: Vec<i64> = g.h.iter().map(|h| i64::from(h.contact)).collect();
+        d.set_item("H_body", hbody.into_pyarray(py))?;
+        d.set_item("H_contact", hcontact.into_pyarray(py))?;
+        d.set_item("b", vec3_array(py, &g.b))?;
+        Ok(d)
+    }
+
+    /// Writes the current state as a frame of the ParaView series in `dir` (`grains.pvd`,
+    /// `bodies.pvd`, `contacts.pvd` and `dir/vtk/*.vtu`, the CLI's layout). Successive calls
+    /// on one folder add frames; a folder written before keeps its frames up to the current
+    /// time (as a resumed run does).
+    fn write_vtk(&mut self, dir: PathBuf) -> PyResult<()> {
+        let io =
+            |e: std::io::Error| PyIOError::new_err(format!("write_vtk {}: {e}", dir.display()));
+        let same = matches!(&self.vtk, Some((d, _)) if *d == dir);
+        if !same {
+            let w = VtkWriter::resume(&dir, self.world.time).map_err(io)?;
+            self.vtk = Some((dir.clone(), w));
+        }
+        let (_, w) = self.vtk.as_mut().expect("opened above");
+        w.write_frame(&self.world).map_err(io)
     }
 
     /// The track indicators (the columns `series.csv` adds) at the current state.
@@ -321,13 +411,12 @@ fn problem_dict<'py>(py: Python<'py>, p: &ContactProblem) -> PyResult<Bound<'py,
     let d = PyDict::new(py);
     let indptr: Vec<i64> = p.w.row_start.iter().map(|&x| x as i64).collect();
     let indices: Vec<i64> = p.w.cols.iter().map(|&x| i64::from(x)).collect();
-    let flat: Vec<f64> = p
-        .w
-        .blocks
-        .iter()
-        // Row-major 3×3 blocks (glam stores columns).
-        .flat_map(|b| b.transpose().to_cols_array())
-        .collect();
+    let flat: Vec<f64> =
+        p.w.blocks
+            .iter()
+            // Row-major 3×3 blocks (glam stores columns).
+            .flat_map(|b| b.transpose().to_cols_array())
+            .collect();
     let nb = p.w.blocks.len();
     d.set_item("indptr", indptr.into_pyarray(py))?;
     d.set_item("indices", indices.into_pyarray(py))?;
@@ -402,11 +491,15 @@ fn solve_fc3d_blocks<'py>(
         )));
     }
     if b.len() != 9 * cols.len() || cols.iter().any(|&c| c as usize >= n) {
-        return Err(value_error("W: blocks must have shape (nnzb, 3, 3), columns < n"));
+        return Err(value_error(
+            "W: blocks must have shape (nnzb, 3, 3), columns < n",
+        ));
     }
     let blocks: Vec<ballast_engine::math::DMat3> = b
         .chunks_exact(9)
-        .map(|m| ballast_engine::math::DMat3::from_cols_array(&m.try_into().expect("9")).transpose())
+        .map(|m| {
+            ballast_engine::math::DMat3::from_cols_array(&m.try_into().expect("9")).transpose()
+        })
         .collect();
     let scale = qv.iter().map(|x| x.length_squared()).sum::<f64>().sqrt();
     let problem = ContactProblem {

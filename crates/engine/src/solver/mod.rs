@@ -25,7 +25,7 @@ pub use delassus::{LocalProblem, SolverBody};
 pub use drive::DriveRows;
 pub use nlgs::{Nlgs, SolveReport};
 pub use partition::{Balance, Partition};
-pub use problem::{BlockMatrix, ContactProblem};
+pub use problem::{BlockMatrix, ContactProblem, GlobalProblem, HBlock};
 
 use serde::{Deserialize, Serialize};
 

@@ -268,6 +268,139 @@ impl ContactProblem {
     }
 }
 
+/// One 6×3 block of `H`: the impulse (`force`) and angular impulse about the centre of mass
+/// (`torque`) that a local impulse `r` of `contact` applies to body slot `body`:
+/// `P = force · r`, `L = torque · r`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HBlock {
+    /// Slot of the body in [`GlobalProblem::bodies`].
+    pub body: u32,
+    /// The contact.
+    pub contact: u32,
+    /// `s E` (`s = −1` for the contact's first body, `+1` for its second; `E = [n t s]`).
+    pub force: DMat3,
+    /// `s [a×] E` with `a` the lever arm from the body's centre of mass to the point.
+    pub torque: DMat3,
+}
+
+/// The global form of a step's contact problem, as FCLIB's `fclib_global` and Siconos'
+/// `GlobalFrictionContactProblem` hold it: with `v` the velocities `(v, ω)` of the bodies the
+/// contacts move,
+///
+/// ```text
+/// v = v_free + M⁻¹ H r,   u = Hᵀ v + b,   so   W = Hᵀ M⁻¹ H,   q = Hᵀ v_free + b,
+/// ```
+///
+/// where `b` gathers what does not depend on those bodies: the motion of driven and fixed
+/// bodies and the gap shift of [`ContactProblem`]. `M⁻¹` is the solver's: zero on a degree of
+/// freedom a drive imposes.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct GlobalProblem {
+    /// The bodies the contacts move (world indices, increasing).
+    pub bodies: Vec<u32>,
+    /// Their inverse masses.
+    pub inv_mass: Vec<f64>,
+    /// Their inverse inertia tensors (world frame).
+    pub inv_inertia: Vec<DMat3>,
+    /// Their free velocities: linear, angular.
+    pub v_free: Vec<[DVec3; 2]>,
+    /// `H` as 6×3 blocks, by contact, then body slot.
+    pub h: Vec<HBlock>,
+    /// `b = q − Hᵀ v_free`, per contact.
+    pub b: Vec<DVec3>,
+}
+
+impl GlobalProblem {
+    /// The global form of `problem`, the contact problem of `locals` on `v_free` (see
+    /// [`ContactProblem::assemble`]).
+    pub fn assemble(
+        locals: &[LocalProblem],
+        v_free: &[SolverBody],
+        problem: &ContactProblem,
+    ) -> Self {
+        let mut slot = vec![u32::MAX; v_free.len()];
+        let mut bodies = Vec::new();
+        for c in locals {
+            for (body, dynamic) in [(c.body1, c.dynamic1), (c.body2, c.dynamic2)] {
+                if dynamic {
+                    bodies.push(body);
+                }
+            }
+        }
+        bodies.sort_unstable();
+        bodies.dedup();
+        for (k, &b) in bodies.iter().enumerate() {
+            slot[b as usize] = k as u32;
+        }
+        let mut h = Vec::with_capacity(2 * locals.len());
+        let mut b = Vec::with_capacity(locals.len());
+        for (a, c) in locals.iter().enumerate() {
+            let [n, t, s] = c.frame3();
+            let e = DMat3::from_cols(n, t, s);
+            let mut htv = DVec3::ZERO;
+            for (body, sign, arm, dynamic) in [
+                (c.body1, -1.0, c.r1, c.dynamic1),
+                (c.body2, 1.0, c.r2, c.dynamic2),
+            ] {
+                if !dynamic {
+                    continue;
+                }
+                let force = e * sign;
+                let torque = skew(arm) * force;
+                let vb = &v_free[body as usize];
+                htv += force.transpose() * vb.v + torque.transpose() * vb.w;
+                h.push(HBlock {
+                    body: slot[body as usize],
+                    contact: a as u32,
+                    force,
+                    torque,
+                });
+            }
+            b.push(problem.q[a] - htv);
+        }
+        GlobalProblem {
+            inv_mass: bodies
+                .iter()
+                .map(|&i| v_free[i as usize].inv_mass)
+                .collect(),
+            inv_inertia: bodies
+                .iter()
+                .map(|&i| v_free[i as usize].inv_inertia)
+                .collect(),
+            v_free: bodies
+                .iter()
+                .map(|&i| [v_free[i as usize].v, v_free[i as usize].w])
+                .collect(),
+            bodies,
+            h,
+            b,
+        }
+    }
+
+    /// `Hᵀ M⁻¹ H r` for local impulses `r`: `W r` computed through the bodies (a check of
+    /// [`ContactProblem::w`]).
+    pub fn w_times(&self, r: &[DVec3]) -> Vec<DVec3> {
+        let mut p = vec![[DVec3::ZERO; 2]; self.bodies.len()];
+        for blk in &self.h {
+            let x = r[blk.contact as usize];
+            let pb = &mut p[blk.body as usize];
+            pb[0] += blk.force * x;
+            pb[1] += blk.torque * x;
+        }
+        let dv: Vec<[DVec3; 2]> = p
+            .iter()
+            .enumerate()
+            .map(|(k, [f, l])| [*f * self.inv_mass[k], self.inv_inertia[k] * *l])
+            .collect();
+        let mut u = vec![DVec3::ZERO; r.len()];
+        for blk in &self.h {
+            let [dv, dw] = dv[blk.body as usize];
+            u[blk.contact as usize] += blk.force.transpose() * dv + blk.torque.transpose() * dw;
+        }
+        u
+    }
+}
+
 /// `u = Hᵀ V` of every local problem at the velocities `v` (no gap shift): the matrix-free
 /// counterpart of [`ContactProblem::velocity`].
 pub fn local_velocities<B: BodyAccess + ?Sized>(locals: &[LocalProblem], v: &B) -> Vec<DVec3> {
