@@ -272,7 +272,7 @@ def test_global_form_of_the_contact_problem():
 
 
 def test_write_vtk_frames_read_back(tmp_path):
-    meshio = pytest.importorskip("meshio")
+    import meshio
     sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
     out = tmp_path / "frames"
     for _ in range(3):
@@ -288,7 +288,10 @@ def test_write_vtk_frames_read_back(tmp_path):
     vel = np.concatenate([c for c in m.cell_data["velocity"]])
     dynamic = [i for i, k in enumerate(sim.kinds) if k == "dynamic"]
     assert set(ids.tolist()) == set(dynamic)
-    assert np.abs(vel - sim.velocities[ids]).max() == 0.0
+    # Written as Float32 (7 significant digits: all a picture needs).
+    assert vel.dtype == np.float32
+    want = sim.velocities[ids]
+    assert np.abs(vel - want).max() <= 2.0**-23 * np.abs(want).max()
     # A new Simulation writing into the folder keeps the frames up to its time.
     again = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
     again.step(100)

@@ -11,8 +11,12 @@ Every .vtu is read twice:
     expected values. meshio 5.3 cannot read a grid without cells (IndexError in
     vtk_cells_from_data), so such files (a frame without contacts) are checked through the
     second reader only;
-  * by a strict parser of the raw appended layout written here (header, offsets, block sizes
-    that must tile the data exactly), whose arrays must also agree with meshio's.
+  * by a strict parser of the zlib-compressed appended layout written here (VTK's
+    `vtkZLibDataCompressor` blocks: header, offsets, compressed block sizes that must tile the
+    data exactly, blocks that inflate to the sizes the header gives), whose arrays must also
+    agree with meshio's.
+Float32 arrays (points, vector fields) are compared with the expected doubles to float32
+rounding: one unit in the last place of the largest expected magnitude.
 If the `vtk` Python package happens to be installed, VTK's own XML reader (ParaView's) must read
 every file without error too; it is optional, meshio is not.
 
@@ -26,6 +30,7 @@ import os
 import re
 import sys
 import xml.etree.ElementTree as ET
+import zlib
 
 try:
     import numpy as np
@@ -40,9 +45,12 @@ NUMPY = {
     "UInt8": np.uint8,
     "Int32": np.int32,
     "Int64": np.int64,
+    "Float32": np.float32,
     "Float64": np.float64,
 }
 TOL = 1e-12
+# Float32's unit in the last place, relative: the rounding of a double written as Float32.
+TOL32 = 2.0**-23
 
 errors = []
 
@@ -56,7 +64,9 @@ def close(a, b, tol=TOL):
 
 
 def compare(where, got, want, tol=TOL):
-    """Compares nested lists of numbers; records the first mismatch."""
+    """Compares nested lists of numbers; records the first mismatch. Float32 values are
+    compared to float32 rounding of the largest expected magnitude."""
+    single = np.asarray(got).dtype == np.float32
     got = np.asarray(got, dtype=float)
     want = np.asarray(want, dtype=float)
     if got.size == 0 and want.size == 0:
@@ -64,7 +74,11 @@ def compare(where, got, want, tol=TOL):
     if got.shape != want.shape:
         fail(f"{where}: shape {got.shape}, expected {want.shape}")
         return
-    bad = ~np.isclose(got, want, rtol=tol, atol=tol)
+    atol = tol
+    if single:
+        tol = max(tol, TOL32)
+        atol = tol * max(1.0, float(np.abs(want).max()))
+    bad = ~np.isclose(got, want, rtol=tol, atol=atol)
     if bad.any():
         k = np.argwhere(bad)[0]
         fail(f"{where}[{', '.join(map(str, k))}]: got {got[tuple(k)]!r}, expected {want[tuple(k)]!r}")
@@ -74,7 +88,8 @@ def compare(where, got, want, tol=TOL):
 
 
 def read_raw(path):
-    """Parses a raw-appended .vtu; returns the normalized grid or None after recording errors."""
+    """Parses a zlib-compressed raw-appended .vtu; returns the normalized grid or None after
+    recording errors."""
     raw = open(path, "rb").read()
     m = re.search(rb'<AppendedData encoding="raw">\s*_', raw)
     end = raw.rfind(b"</AppendedData>")
@@ -91,8 +106,9 @@ def read_raw(path):
     for k, v in want.items():
         if root.get(k) != v:
             fail(f"{path}: VTKFile {k}={root.get(k)!r}, expected {v!r}")
-    if root.get("compressor") is not None:
-        fail(f"{path}: unexpected compressor")
+    if root.get("compressor") != "vtkZLibDataCompressor":
+        fail(f"{path}: compressor {root.get('compressor')!r}, expected 'vtkZLibDataCompressor'")
+        return None
     pieces = root.findall("UnstructuredGrid/Piece")
     if len(pieces) != 1:
         fail(f"{path}: {len(pieces)} pieces, expected 1")
@@ -116,18 +132,26 @@ def read_raw(path):
         if offset != pos:
             fail(f"{path}: {name} at offset {offset}, previous block ends at {pos}")
             return None
-        size = int(np.frombuffer(data[pos : pos + 8], "<u8")[0])
+        nblocks, block, last = (int(x) for x in np.frombuffer(data[pos : pos + 24], "<u8"))
+        sizes = [int(x) for x in np.frombuffer(data[pos + 24 : pos + 24 + 8 * nblocks], "<u8")]
+        pos += 24 + 8 * nblocks
+        raw_bytes = b""
+        for k, c in enumerate(sizes):
+            chunk = zlib.decompress(data[pos : pos + c])
+            want_len = last if (k == nblocks - 1 and last) else block
+            if len(chunk) != want_len:
+                fail(f"{path}: {name} block {k} inflates to {len(chunk)} bytes, header says {want_len}")
+                return None
+            raw_bytes += chunk
+            pos += c
         dtype = np.dtype(NUMPY[e.get("type")]).newbyteorder("<")
+        size = len(raw_bytes)
         if size % dtype.itemsize:
             fail(f"{path}: {name} has {size} bytes, not a multiple of {dtype.itemsize}")
             return None
-        values = np.frombuffer(data[pos + 8 : pos + 8 + size], dtype)
-        if len(values) * dtype.itemsize != size:
-            fail(f"{path}: {name} truncated")
-            return None
+        values = np.frombuffer(raw_bytes, dtype)
         ncomp = int(e.get("NumberOfComponents", "1"))
         grid[section][name] = values.reshape(-1, ncomp) if ncomp > 1 else values
-        pos += 8 + size
     if data[pos:].strip():
         fail(f"{path}: {len(data) - pos} stray bytes after the last array")
 
@@ -223,7 +247,8 @@ def same_grids(path, a, b):
 def check_square(where, pts, sq):
     """A half-space's square: in the plane, centred, of the given side, CCW about the normal."""
     c, n, side = np.array(sq["centre"]), np.array(sq["normal"]), sq["side"]
-    tol = 1e-9 * max(side, 1.0)
+    # Float32 corners: a few units in the last place of the largest coordinate.
+    tol = 4 * TOL32 * max(side, float(np.abs(c).max()), 1.0)
     if len(pts) != 4:
         fail(f"{where}: {len(pts)} corners, expected 4")
         return

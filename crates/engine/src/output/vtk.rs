@@ -12,14 +12,14 @@
 //! * `grains`: the dynamic bodies. Each polyhedron is written as its faces (`VTK_POLYGON` cells,
 //!   counter-clockwise seen from outside) over its world vertices (shared by the faces of one
 //!   body, not across bodies). Cell data, repeated on every face of a body: `id` (body index,
-//!   Int32), `group` (Int32), `velocity` and `angular_velocity` (world frame, Float64 × 3).
+//!   Int32), `group` (Int32), `velocity` and `angular_velocity` (world frame, Float32 × 3).
 //! * `bodies`: the other (kinematic and fixed) bodies, written the same way with an extra cell
 //!   field `kind` (Int32: 1 kinematic, 2 fixed). A half-space is drawn as one square in its
 //!   boundary plane, centred on the projection of the centre of the scene's bounding box, of
 //!   side 1.5 × the box diagonal (1 m without polyhedra); it follows the scene from frame to
 //!   frame.
 //! * `contacts`: one `VTK_VERTEX` cell per contact point, with point data (point data, so that
-//!   ParaView's Glyph filter applies directly): `normal` (unit, from body 1 toward body 2),
+//!   ParaView's Glyph filter applies directly, Float32 × 3 but `gap`): `normal` (unit, from body 1 toward body 2),
 //!   `normal_force` (`r_n n / h`, N), `tangential_force` (`(r_t t + r_s s) / h`, N), both the
 //!   mean force of the last step acting on body 2, `status` (Int32: 0 no contact, 1 stick,
 //!   2 slide), `body1`, `body2` (Int32) and `gap` (Float64, m). The contacts are those of the
@@ -28,9 +28,14 @@
 //! Every `.vtu` also holds the field `TimeValue` (Float64), for files opened on their own.
 //!
 //! Format: `UnstructuredGrid` version 1.0, little-endian, `header_type="UInt64"`, all arrays in
-//! one raw (not base64, not compressed) `<AppendedData>` block. It is VTK's own default layout
-//! without compression: the fastest to write and the smallest uncompressed one, read by
-//! ParaView/VTK and by meshio. Connectivity and offsets are Int32 unless a file needs more.
+//! one raw (not base64) `<AppendedData>` block, each compressed with zlib
+//! (`compressor="vtkZLibDataCompressor"`: VTK's own compressed layout, read by ParaView/VTK and
+//! by meshio): per array a header `[blocks, block size, size of the last block, compressed
+//! size of each block]` (UInt64), then the blocks, compressed in parallel. Points and the
+//! vector fields are Float32 (7 significant digits: a picture gains nothing from more; the
+//! gap and the time stay Float64), and the per-face copies of a body's fields compress to
+//! almost nothing, so a frame is several times smaller than raw doubles. Connectivity and
+//! offsets are Int32 unless a file needs more.
 
 use super::write_atomic;
 use crate::bodies::BodyKind;
@@ -38,8 +43,10 @@ use crate::laws::ContactStatus;
 use crate::math::{DMat3, DVec3};
 use crate::shapes::{ConvexPolyhedron, Shape};
 use crate::world::World;
-use std::fs::File;
-use std::io::{self, BufWriter, Write};
+use flate2::write::ZlibEncoder;
+use flate2::Compression;
+use rayon::prelude::*;
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 
 /// Names of the three series, in the order of `VtkWriter::series`.
@@ -52,8 +59,9 @@ const VTK_POLYGON: u8 = 7;
 const PLANE_SIDE_FACTOR: f64 = 1.5;
 /// Side of a half-space's square when there is no polyhedron to size it (m).
 const PLANE_SIDE_DEFAULT: f64 = 1.0;
-/// Write buffer: large enough that the system-call count is negligible even for big frames.
-const BUFFER: usize = 1 << 20;
+/// Uncompressed size of a zlib block: big enough that each block compresses well and that
+/// the headers are negligible, small enough that a frame's arrays compress in parallel.
+const BLOCK: usize = 1 << 20;
 
 /// One frame of a series: its physical time and its file, relative to the output folder.
 #[derive(Clone, Debug, PartialEq)]
@@ -342,18 +350,18 @@ fn write_bodies(path: &Path, world: &World, others: bool) -> io::Result<()> {
         Array::new(
             Section::Cell,
             "velocity",
-            Type::F64,
+            Type::F32,
             3,
             num_cells,
-            move |o| per_face(parts, |i| o.vec3(b.velocity[i])),
+            move |o| per_face(parts, |i| o.vec3_f32(b.velocity[i])),
         ),
         Array::new(
             Section::Cell,
             "angular_velocity",
-            Type::F64,
+            Type::F32,
             3,
             num_cells,
-            move |o| per_face(parts, |i| o.vec3(b.angular_velocity[i])),
+            move |o| per_face(parts, |i| o.vec3_f32(b.angular_velocity[i])),
         ),
     ];
     if others {
@@ -377,7 +385,7 @@ fn write_bodies(path: &Path, world: &World, others: bool) -> io::Result<()> {
     arrays.push(Array::new(
         Section::Points,
         "Points",
-        Type::F64,
+        Type::F32,
         3,
         num_points,
         move |o| {
@@ -389,12 +397,12 @@ fn write_bodies(path: &Path, world: &World, others: bool) -> io::Result<()> {
                         position,
                     } => {
                         for &v in &shape.vertices {
-                            o.vec3(*position + *rotation * v)?;
+                            o.vec3_f32(*position + *rotation * v)?;
                         }
                     }
                     Surface::Square(corners) => {
                         for &c in corners {
-                            o.vec3(c)?;
+                            o.vec3_f32(c)?;
                         }
                     }
                 }
@@ -465,23 +473,23 @@ fn write_contacts(path: &Path, world: &World) -> io::Result<()> {
     let index = IndexType::for_sizes(n);
     let arrays = vec![
         Array::field_time(world.time),
-        Array::new(Section::Point, "normal", Type::F64, 3, n, move |o| {
-            c.frame.iter().try_for_each(|f| o.vec3(f[0]))
+        Array::new(Section::Point, "normal", Type::F32, 3, n, move |o| {
+            c.frame.iter().try_for_each(|f| o.vec3_f32(f[0]))
         }),
-        Array::new(Section::Point, "normal_force", Type::F64, 3, n, move |o| {
-            (0..n).try_for_each(|k| o.vec3(c.frame[k][0] * (c.impulse[k].x * inv_h)))
+        Array::new(Section::Point, "normal_force", Type::F32, 3, n, move |o| {
+            (0..n).try_for_each(|k| o.vec3_f32(c.frame[k][0] * (c.impulse[k].x * inv_h)))
         }),
         Array::new(
             Section::Point,
             "tangential_force",
-            Type::F64,
+            Type::F32,
             3,
             n,
             move |o| {
                 (0..n).try_for_each(|k| {
                     let [_, t, s] = c.frame[k];
                     let r = c.impulse[k];
-                    o.vec3((t * r.y + s * r.z) * inv_h)
+                    o.vec3_f32((t * r.y + s * r.z) * inv_h)
                 })
             },
         ),
@@ -503,8 +511,8 @@ fn write_contacts(path: &Path, world: &World) -> io::Result<()> {
         Array::new(Section::Point, "gap", Type::F64, 1, n, move |o| {
             c.gap.iter().try_for_each(|&g| o.f64(g))
         }),
-        Array::new(Section::Points, "Points", Type::F64, 3, n, move |o| {
-            c.point.iter().try_for_each(|&p| o.vec3(p))
+        Array::new(Section::Points, "Points", Type::F32, 3, n, move |o| {
+            c.point.iter().try_for_each(|&p| o.vec3_f32(p))
         }),
         Array::new(Section::Cells, "connectivity", index.ty(), 1, n, move |o| {
             (0..n).try_for_each(|k| o.index(index, k))
@@ -523,6 +531,7 @@ enum Type {
     U8,
     I32,
     I64,
+    F32,
     F64,
 }
 
@@ -532,6 +541,7 @@ impl Type {
             Type::U8 => "UInt8",
             Type::I32 => "Int32",
             Type::I64 => "Int64",
+            Type::F32 => "Float32",
             Type::F64 => "Float64",
         }
     }
@@ -539,7 +549,7 @@ impl Type {
     fn size(self) -> u64 {
         match self {
             Type::U8 => 1,
-            Type::I32 => 4,
+            Type::I32 | Type::F32 => 4,
             Type::F64 | Type::I64 => 8,
         }
     }
@@ -637,17 +647,16 @@ impl<'a> Array<'a> {
     }
 }
 
-/// Buffered little-endian output that counts the bytes written.
+/// Little-endian bytes of one array, gathered before compression.
 struct Sink {
-    out: BufWriter<File>,
-    written: u64,
+    out: Vec<u8>,
 }
 
 impl Sink {
     #[inline]
     fn bytes(&mut self, b: &[u8]) -> io::Result<()> {
-        self.written += b.len() as u64;
-        self.out.write_all(b)
+        self.out.extend_from_slice(b);
+        Ok(())
     }
 
     #[inline]
@@ -661,11 +670,11 @@ impl Sink {
     }
 
     #[inline]
-    fn vec3(&mut self, v: DVec3) -> io::Result<()> {
-        let mut b = [0u8; 24];
-        b[..8].copy_from_slice(&v.x.to_le_bytes());
-        b[8..16].copy_from_slice(&v.y.to_le_bytes());
-        b[16..].copy_from_slice(&v.z.to_le_bytes());
+    fn vec3_f32(&mut self, v: DVec3) -> io::Result<()> {
+        let mut b = [0u8; 12];
+        b[..4].copy_from_slice(&(v.x as f32).to_le_bytes());
+        b[4..8].copy_from_slice(&(v.y as f32).to_le_bytes());
+        b[8..].copy_from_slice(&(v.z as f32).to_le_bytes());
         self.bytes(&b)
     }
 
@@ -678,14 +687,60 @@ impl Sink {
     }
 }
 
-/// Writes an `UnstructuredGrid` with every array in one raw appended block: the XML header
-/// (offsets are known from the sizes), then per array its byte count (UInt64) and its bytes.
+/// `data` in VTK's zlib layout: the UInt64 header `[blocks, BLOCK, size of the last block if
+/// partial (else 0), compressed size of each block]`, then the compressed blocks. Blocks are
+/// compressed independently (in parallel), so the bytes do not depend on the thread count.
+fn compress(data: &[u8]) -> io::Result<Vec<u8>> {
+    let blocks: Vec<Vec<u8>> = data
+        .par_chunks(BLOCK)
+        .map(|chunk| {
+            let mut z = ZlibEncoder::new(Vec::with_capacity(chunk.len() / 4), Compression::fast());
+            z.write_all(chunk)?;
+            z.finish()
+        })
+        .collect::<io::Result<_>>()?;
+    let last = data.len() % BLOCK;
+    let mut out =
+        Vec::with_capacity(8 * (3 + blocks.len()) + blocks.iter().map(Vec::len).sum::<usize>());
+    for x in [blocks.len(), BLOCK, last] {
+        out.extend_from_slice(&(x as u64).to_le_bytes());
+    }
+    for b in &blocks {
+        out.extend_from_slice(&(b.len() as u64).to_le_bytes());
+    }
+    for b in &blocks {
+        out.extend_from_slice(b);
+    }
+    Ok(out)
+}
+
+/// Writes an `UnstructuredGrid` with every array in one appended block, each compressed (see
+/// [`compress`]): the arrays are filled and compressed first, so the XML header can give
+/// their offsets; the file is then written atomically (temporary file, then rename).
 fn write_vtu(path: &Path, num_points: usize, num_cells: usize, arrays: &[Array]) -> io::Result<()> {
+    let mut packed = Vec::with_capacity(arrays.len());
+    for a in arrays {
+        let expected = a.num_bytes();
+        let mut sink = Sink {
+            out: Vec::with_capacity(expected as usize),
+        };
+        (a.fill)(&mut sink)?;
+        // A size mismatch would make the file unreadable: fail rather than write garbage.
+        if sink.out.len() as u64 != expected {
+            return Err(io::Error::other(format!(
+                "{}: array {} has {} bytes, {expected} declared",
+                path.display(),
+                a.name,
+                sink.out.len()
+            )));
+        }
+        packed.push(compress(&sink.out)?);
+    }
     let mut offsets = Vec::with_capacity(arrays.len());
     let mut offset = 0u64;
-    for a in arrays {
+    for p in &packed {
         offsets.push(offset);
-        offset += 8 + a.num_bytes();
+        offset += p.len() as u64;
     }
     let tag = |a: &Array, offset: u64| {
         let components = if a.section == Section::Field {
@@ -712,7 +767,8 @@ fn write_vtu(path: &Path, num_points: usize, num_cells: usize, arrays: &[Array])
     };
     let mut xml = String::from(
         "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" \
-         byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n",
+         byte_order=\"LittleEndian\" header_type=\"UInt64\" \
+         compressor=\"vtkZLibDataCompressor\">\n  <UnstructuredGrid>\n",
     );
     xml += &section(Section::Field, "<FieldData>", "</FieldData>", "    ");
     xml += &format!("    <Piece NumberOfPoints=\"{num_points}\" NumberOfCells=\"{num_cells}\">\n");
@@ -722,26 +778,12 @@ fn write_vtu(path: &Path, num_points: usize, num_cells: usize, arrays: &[Array])
     xml += &section(Section::Cells, "<Cells>", "</Cells>", "      ");
     xml += "    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _";
 
-    let mut sink = Sink {
-        out: BufWriter::with_capacity(BUFFER, File::create(path)?),
-        written: 0,
-    };
-    sink.bytes(xml.as_bytes())?;
-    for a in arrays {
-        let expected = a.num_bytes();
-        sink.bytes(&expected.to_le_bytes())?;
-        let start = sink.written;
-        (a.fill)(&mut sink)?;
-        // A size mismatch would shift every later offset: fail rather than write garbage.
-        if sink.written - start != expected {
-            return Err(io::Error::other(format!(
-                "{}: array {} has {} bytes, {expected} declared",
-                path.display(),
-                a.name,
-                sink.written - start
-            )));
-        }
+    let tail = b"\n  </AppendedData>\n</VTKFile>\n";
+    let mut file = Vec::with_capacity(xml.len() + offset as usize + tail.len());
+    file.extend_from_slice(xml.as_bytes());
+    for p in &packed {
+        file.extend_from_slice(p);
     }
-    sink.bytes(b"\n  </AppendedData>\n</VTKFile>\n")?;
-    sink.out.flush()
+    file.extend_from_slice(tail);
+    write_atomic(path, &file)
 }
