@@ -714,6 +714,36 @@ fn secs(t: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+/// Longest scenario line the report copies whole (a vertex list can be megabytes long).
+const REPORT_LINE: usize = 200;
+/// Most scenario bytes the report copies; the whole file is `DIR/scenario.toml`.
+const REPORT_SCENARIO: usize = 16 * 1024;
+
+/// The scenario as the report shows it: lines longer than [`REPORT_LINE`] characters cut, and
+/// nothing past [`REPORT_SCENARIO`] bytes, each cut saying what it left out.
+fn parameters_excerpt(text: &str) -> String {
+    let mut out = String::new();
+    let lines: Vec<&str> = text.lines().collect();
+    for (k, line) in lines.iter().enumerate() {
+        if out.len() > REPORT_SCENARIO {
+            let _ = writeln!(
+                out,
+                "# … {} more lines: the whole scenario is scenario.toml",
+                lines.len() - k
+            );
+            break;
+        }
+        let chars = line.chars().count();
+        if chars > REPORT_LINE {
+            let head: String = line.chars().take(REPORT_LINE).collect();
+            let _ = writeln!(out, "{head} # … {} more characters", chars - REPORT_LINE);
+        } else {
+            let _ = writeln!(out, "{line}");
+        }
+    }
+    out
+}
+
 /// The text of `report.md`.
 fn report_markdown(
     scenario_file: &Path,
@@ -747,8 +777,9 @@ fn report_markdown(
     );
 
     let _ = writeln!(s, "## Parameters\n");
-    let fence = fence_for(scenario_text);
-    let _ = writeln!(s, "{fence}toml\n{}\n{fence}\n", scenario_text.trim_end());
+    let shown = parameters_excerpt(scenario_text);
+    let fence = fence_for(&shown);
+    let _ = writeln!(s, "{fence}toml\n{}\n{fence}\n", shown.trim_end());
 
     let _ = writeln!(s, "## Timings (Table 1)\n");
     let total = num(summary, "/timings_s/total").filter(|t| *t > 0.0);
@@ -1059,6 +1090,11 @@ mod tests {
             ],
         );
         let scenario = "# test scenario\n[simulation]\ndt = 1e-3\n```not a fence```\n";
+        // A huge value (a vertex list) and a long file are cut in the report.
+        let long_value = format!("vertices = [{}]", "[0.1, 0.2, 0.3], ".repeat(20_000));
+        let many_lines = "# a comment line\n".repeat(2_000);
+        let scenario = format!("{scenario}{long_value}\n{many_lines}");
+        let scenario = scenario.as_str();
         write_run_report(
             &dir,
             Path::new("scenarios/tamping.toml"),
@@ -1067,6 +1103,13 @@ mod tests {
         )
         .unwrap();
         let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+        assert!(md.len() < 40_000, "report.md is {} bytes", md.len());
+        assert!(md.contains(&format!(
+            "vertices = [{} # … {} more characters",
+            &"[0.1, 0.2, 0.3], ".repeat(20)[..REPORT_LINE - 12],
+            long_value.len() - REPORT_LINE
+        )));
+        assert!(md.contains("more lines: the whole scenario is scenario.toml"));
         for needle in [
             "# ballast run report: `tamping.toml`",
             "````toml\n# test scenario",
