@@ -145,24 +145,26 @@ fn non_finite_state_is_named() {
 
 #[test]
 fn an_overlap_deeper_than_the_inradius_is_named() {
-    // The projectile's centre 10 mm inside the block's top face: 30 mm overlap, more than
-    // its 20 mm inradius.
-    let (s, mut w) = two_boxes("", "center = [0, 0, 0.09]");
+    // The projectile's centre 30 mm inside the block's top face: 50 mm overlap, more than
+    // twice its 20 mm inradius.
+    let (s, mut w) = two_boxes("", "center = [0, 0, 0.07]");
     let check = s.health_check(&w);
     let d = run_until_fault(&mut w, &check, 1).expect("caught");
     assert_eq!((d.step, d.quantity), (1, Quantity::Overlap));
     let mut bodies = d.bodies.clone();
     bodies.sort_unstable();
     assert_eq!(bodies, [1, 2]);
-    assert!((d.value - 0.03).abs() < 1e-6, "{}", d.value);
-    assert!((d.bound - 0.02).abs() < 1e-12, "{}", d.bound);
+    assert!((d.value - 0.05).abs() < 1e-6, "{}", d.value);
+    assert!((d.bound - 0.04).abs() < 1e-12, "{}", d.bound);
     let msg = d.to_string();
     assert!(
-        msg.contains("overlap by 30 mm, more than the bound 20 mm"),
+        msg.contains("overlap by 50 mm, more than the bound 40 mm")
+            && msg.contains("2 × the smaller inradius of the two bodies, 20 mm"),
         "{msg}"
     );
-    // 5 mm overlap: within the bound; and a fixed bound of 1 mm catches it.
-    let (s, mut w) = two_boxes("", "center = [0, 0, 0.115]");
+    // 30 mm overlap, more than the inradius: within the bound; a fixed bound of 1 mm
+    // catches it.
+    let (s, mut w) = two_boxes("", "center = [0, 0, 0.09]");
     assert_eq!(
         {
             let c = s.health_check(&w);
@@ -170,7 +172,7 @@ fn an_overlap_deeper_than_the_inradius_is_named() {
         },
         None
     );
-    let (s, mut w) = two_boxes("max_overlap = 1e-3", "center = [0, 0, 0.115]");
+    let (s, mut w) = two_boxes("max_overlap = 1e-3", "center = [0, 0, 0.09]");
     let d = {
         let c = s.health_check(&w);
         run_until_fault(&mut w, &c, 1)
