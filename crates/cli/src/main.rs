@@ -194,6 +194,27 @@ fn set_threads(threads: Option<usize>) -> Result<usize, String> {
     Ok(rayon::current_num_threads())
 }
 
+/// Longest line of an error message (characters): a TOML error quotes the offending line,
+/// which may hold a value of megabytes.
+const MESSAGE_LINE_CHARS: usize = 1000;
+
+/// `message` with every line cut to [`MESSAGE_LINE_CHARS`] characters, saying how much is cut.
+fn cut_lines(message: &str) -> String {
+    message
+        .lines()
+        .map(|l| {
+            let n = l.chars().count();
+            if n > MESSAGE_LINE_CHARS {
+                let head: String = l.chars().take(MESSAGE_LINE_CHARS).collect();
+                format!("{head} … ({} more characters)", n - MESSAGE_LINE_CHARS)
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// Exit code of a run stopped by the health check (1 is any other error, 2 a command-line
 /// error).
 const EXIT_DIVERGED: u8 = 3;
@@ -273,11 +294,11 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(run::Failure::Error(e)) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", cut_lines(&e));
             ExitCode::FAILURE
         }
         Err(run::Failure::Diverged(e)) => {
-            eprintln!("error: {e}");
+            eprintln!("error: {}", cut_lines(&e));
             ExitCode::from(EXIT_DIVERGED)
         }
     }

@@ -223,6 +223,38 @@ fn sig(x: Option<f64>) -> String {
     }
 }
 
+/// Lines of the scenario copied into the report (the whole file is `scenario.toml`).
+const REPORT_LINES: usize = 400;
+/// Characters of a scenario line copied into the report.
+const REPORT_LINE_CHARS: usize = 300;
+
+/// `text` cut to `max_lines` lines of at most `max_chars` characters each, each cut said in a
+/// TOML comment: a scenario of thousands of bodies, or a 50 MB value, is not copied whole.
+pub fn excerpt(text: &str, max_lines: usize, max_chars: usize) -> String {
+    let mut out = String::new();
+    let total = text.lines().count();
+    for line in text.lines().take(max_lines) {
+        let n = line.chars().count();
+        if n > max_chars {
+            out.extend(line.chars().take(max_chars));
+            out.push_str(&format!(
+                " # … {} more characters, in scenario.toml",
+                n - max_chars
+            ));
+        } else {
+            out.push_str(line);
+        }
+        out.push('\n');
+    }
+    if total > max_lines {
+        out.push_str(&format!(
+            "# … {} more lines, in scenario.toml\n",
+            total - max_lines
+        ));
+    }
+    out
+}
+
 /// A code fence longer than any backtick run in `text`, so the text cannot close it.
 fn fence_for(text: &str) -> String {
     let longest = text.split(|c| c != '`').map(str::len).max().unwrap_or(0);
@@ -747,8 +779,9 @@ fn report_markdown(
     );
 
     let _ = writeln!(s, "## Parameters\n");
-    let fence = fence_for(scenario_text);
-    let _ = writeln!(s, "{fence}toml\n{}\n{fence}\n", scenario_text.trim_end());
+    let shown = excerpt(scenario_text, REPORT_LINES, REPORT_LINE_CHARS);
+    let fence = fence_for(&shown);
+    let _ = writeln!(s, "{fence}toml\n{}\n{fence}\n", shown.trim_end());
 
     let _ = writeln!(s, "## Timings (Table 1)\n");
     let total = num(summary, "/timings_s/total").filter(|t| *t > 0.0);
@@ -938,6 +971,18 @@ pub fn write_scaling_plots(out_dir: &Path, cases: &[ScalingPoint]) -> Result<(),
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn long_scenarios_are_cut_in_the_report() {
+        let long = format!("a = \"{}\"\nb = 1\nc = 2\n", "x".repeat(1000));
+        assert_eq!(
+            super::excerpt(&long, 2, 10),
+            "a = \"xxxxx # … 996 more characters, in scenario.toml\nb = 1\n\
+             # … 1 more lines, in scenario.toml\n"
+        );
+        let short = "a = 1\nb = 2\n";
+        assert_eq!(super::excerpt(short, 400, 300), short);
+    }
+
     use super::*;
     use serde_json::json;
     use std::path::PathBuf;

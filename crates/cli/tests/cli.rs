@@ -765,3 +765,18 @@ fn initial_overlaps_are_named() {
         assert!(err.contains(part), "{part}: {err}");
     }
 }
+
+/// A 5 MB value in a scenario is not echoed whole: the message's lines are cut, saying so.
+#[test]
+fn huge_values_are_cut_in_messages() {
+    let dir = tmp("huge");
+    let huge = format!("dt = \"{}\"", "9".repeat(5_000_000));
+    let f = pile_variant(&dir, "huge.toml", &[("dt = 2e-4", &huge)]);
+    let (code, err) = run_args(&[f.as_os_str(), "--out".as_ref(), dir.join("o").as_os_str()]);
+    assert_eq!(code, Some(1));
+    assert!(err.len() < 5_000, "{} bytes of message", err.len());
+    assert!(
+        err.contains("more characters") && err.contains("dt"),
+        "{err}"
+    );
+}
