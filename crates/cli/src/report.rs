@@ -223,6 +223,38 @@ fn sig(x: Option<f64>) -> String {
     }
 }
 
+/// Lines of the scenario copied into the report (the whole file is `scenario.toml`).
+const REPORT_LINES: usize = 400;
+/// Characters of a scenario line copied into the report.
+const REPORT_LINE_CHARS: usize = 300;
+
+/// `text` cut to `max_lines` lines of at most `max_chars` characters each, each cut said in a
+/// TOML comment: a scenario of thousands of bodies, or a 50 MB value, is not copied whole.
+pub fn excerpt(text: &str, max_lines: usize, max_chars: usize) -> String {
+    let mut out = String::new();
+    let total = text.lines().count();
+    for line in text.lines().take(max_lines) {
+        let n = line.chars().count();
+        if n > max_chars {
+            out.extend(line.chars().take(max_chars));
+            out.push_str(&format!(
+                " # … {} more characters, in scenario.toml",
+                n - max_chars
+            ));
+        } else {
+            out.push_str(line);
+        }
+        out.push('\n');
+    }
+    if total > max_lines {
+        out.push_str(&format!(
+            "# … {} more lines, in scenario.toml\n",
+            total - max_lines
+        ));
+    }
+    out
+}
+
 /// A code fence longer than any backtick run in `text`, so the text cannot close it.
 fn fence_for(text: &str) -> String {
     let longest = text.split(|c| c != '`').map(str::len).max().unwrap_or(0);
@@ -714,36 +746,6 @@ fn secs(t: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
-/// Longest scenario line the report copies whole (a vertex list can be megabytes long).
-const REPORT_LINE: usize = 200;
-/// Most scenario bytes the report copies; the whole file is `DIR/scenario.toml`.
-const REPORT_SCENARIO: usize = 16 * 1024;
-
-/// The scenario as the report shows it: lines longer than [`REPORT_LINE`] characters cut, and
-/// nothing past [`REPORT_SCENARIO`] bytes, each cut saying what it left out.
-fn parameters_excerpt(text: &str) -> String {
-    let mut out = String::new();
-    let lines: Vec<&str> = text.lines().collect();
-    for (k, line) in lines.iter().enumerate() {
-        if out.len() > REPORT_SCENARIO {
-            let _ = writeln!(
-                out,
-                "# … {} more lines: the whole scenario is scenario.toml",
-                lines.len() - k
-            );
-            break;
-        }
-        let chars = line.chars().count();
-        if chars > REPORT_LINE {
-            let head: String = line.chars().take(REPORT_LINE).collect();
-            let _ = writeln!(out, "{head} # … {} more characters", chars - REPORT_LINE);
-        } else {
-            let _ = writeln!(out, "{line}");
-        }
-    }
-    out
-}
-
 /// The text of `report.md`.
 fn report_markdown(
     scenario_file: &Path,
@@ -777,7 +779,7 @@ fn report_markdown(
     );
 
     let _ = writeln!(s, "## Parameters\n");
-    let shown = parameters_excerpt(scenario_text);
+    let shown = excerpt(scenario_text, REPORT_LINES, REPORT_LINE_CHARS);
     let fence = fence_for(&shown);
     let _ = writeln!(s, "{fence}toml\n{}\n{fence}\n", shown.trim_end());
 
@@ -969,6 +971,18 @@ pub fn write_scaling_plots(out_dir: &Path, cases: &[ScalingPoint]) -> Result<(),
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn long_scenarios_are_cut_in_the_report() {
+        let long = format!("a = \"{}\"\nb = 1\nc = 2\n", "x".repeat(1000));
+        assert_eq!(
+            super::excerpt(&long, 2, 10),
+            "a = \"xxxxx # … 996 more characters, in scenario.toml\nb = 1\n\
+             # … 1 more lines, in scenario.toml\n"
+        );
+        let short = "a = 1\nb = 2\n";
+        assert_eq!(super::excerpt(short, 400, 300), short);
+    }
+
     use super::*;
     use serde_json::json;
     use std::path::PathBuf;
@@ -1105,11 +1119,11 @@ mod tests {
         let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
         assert!(md.len() < 40_000, "report.md is {} bytes", md.len());
         assert!(md.contains(&format!(
-            "vertices = [{} # … {} more characters",
-            &"[0.1, 0.2, 0.3], ".repeat(20)[..REPORT_LINE - 12],
-            long_value.len() - REPORT_LINE
+            "vertices = [{} # … {} more characters, in scenario.toml",
+            &"[0.1, 0.2, 0.3], ".repeat(20)[..REPORT_LINE_CHARS - 12],
+            long_value.len() - REPORT_LINE_CHARS
         )));
-        assert!(md.contains("more lines: the whole scenario is scenario.toml"));
+        assert!(md.contains("more lines, in scenario.toml"));
         for needle in [
             "# ballast run report: `tamping.toml`",
             "````toml\n# test scenario",
