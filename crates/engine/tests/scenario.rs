@@ -201,8 +201,12 @@ fn scenarios_round_trip_through_toml() {
     let mut n = 0;
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
+        // Folders (examples/python) and other files are not engine scenarios.
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
         let text = std::fs::read_to_string(&path).unwrap();
-        if path.extension().is_none_or(|e| e != "toml") || text.contains("[track]") {
+        if text.contains("[track]") {
             continue;
         }
         let mut s = Scenario::from_toml(&text).unwrap();
