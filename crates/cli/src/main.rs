@@ -45,8 +45,13 @@ enum Command {
         /// Continue the run in this folder from its newest valid checkpoint, up to --steps.
         #[arg(long)]
         resume: Option<PathBuf>,
+        /// Delete the files of the run already in --out (scenario.toml, summary.json,
+        /// series.csv, report.md, *.pvd, vtk/, checkpoints/, plots/, sections/) before
+        /// starting; without it such a folder is refused.
+        #[arg(long, conflicts_with = "resume")]
+        overwrite: bool,
         /// Stop after this many steps (overrides the scenario).
-        #[arg(long)]
+        #[arg(long, value_parser = parse_steps)]
         steps: Option<u64>,
         /// Worker threads (default: all cores).
         #[arg(long)]
@@ -107,6 +112,13 @@ enum Command {
     },
 }
 
+/// Parses `--steps`: a whole number written out (`1000`, not `1e3`).
+fn parse_steps(s: &str) -> Result<u64, String> {
+    s.trim().parse::<u64>().map_err(|_| {
+        "expected a whole number of steps ≥ 0 written in digits, e.g. 1000".to_string()
+    })
+}
+
 /// Parses one `--thread-counts` entry (≥ 1).
 fn parse_thread_count(s: &str) -> Result<usize, String> {
     match s.trim().parse::<usize>() {
@@ -157,10 +169,22 @@ fn default_cache() -> Option<PathBuf> {
         .or_else(|| var("HOME").map(|d| d.join(".cache").join("ballast")))
 }
 
+/// Most worker threads per core: beyond, threads only wait on each other (and a huge count
+/// exhausts the system's threads while the pool starts).
+const THREADS_PER_CORE: usize = 4;
+
 fn set_threads(threads: Option<usize>) -> Result<usize, String> {
     if let Some(n) = threads {
         if n == 0 {
             return Err("--threads = 0: must be ≥ 1".into());
+        }
+        let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+        if n > THREADS_PER_CORE * cores {
+            return Err(format!(
+                "--threads = {n}: must be at most {} ({THREADS_PER_CORE} × the {cores} cores \
+                 of this machine)",
+                THREADS_PER_CORE * cores
+            ));
         }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
@@ -170,9 +194,13 @@ fn set_threads(threads: Option<usize>) -> Result<usize, String> {
     Ok(rayon::current_num_threads())
 }
 
+/// Exit code of a run stopped by the health check (1 is any other error, 2 a command-line
+/// error).
+const EXIT_DIVERGED: u8 = 3;
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let result = match cli.command {
+    let result: Result<(), run::Failure> = match cli.command {
         Command::Run {
             file,
             preset,
@@ -180,27 +208,31 @@ fn main() -> ExitCode {
             no_cache,
             out,
             resume,
+            overwrite,
             steps,
             threads,
             subdomains,
             quiet,
-        } => set_threads(threads).and_then(|threads| {
-            run::run(&run::RunArgs {
-                file: file.as_deref(),
-                preset: preset.as_deref(),
-                cache: if no_cache {
-                    None
-                } else {
-                    cache.or_else(default_cache)
-                },
-                out: resume.as_deref().unwrap_or(&out),
-                resume: resume.is_some(),
-                steps,
-                threads,
-                subdomains,
-                quiet,
-            })
-        }),
+        } => set_threads(threads)
+            .map_err(run::Failure::Error)
+            .and_then(|threads| {
+                run::run(&run::RunArgs {
+                    file: file.as_deref(),
+                    preset: preset.as_deref(),
+                    cache: if no_cache {
+                        None
+                    } else {
+                        cache.or_else(default_cache)
+                    },
+                    out: resume.as_deref().unwrap_or(&out),
+                    resume: resume.is_some(),
+                    overwrite,
+                    steps,
+                    threads,
+                    subdomains,
+                    quiet,
+                })
+            }),
         Command::Bench {
             json,
             grains,
@@ -225,7 +257,8 @@ fn main() -> ExitCode {
             thread_counts: &thread_counts,
             min_parallel_contacts,
             reuse_distance,
-        }),
+        })
+        .map_err(run::Failure::Error),
         Command::Bench {
             json,
             grains,
@@ -234,13 +267,18 @@ fn main() -> ExitCode {
             threads,
             ..
         } => set_threads(Some(threads))
-            .and_then(|t| bench::bench(json.as_deref(), &grains, settle_steps, steps, t)),
+            .and_then(|t| bench::bench(json.as_deref(), &grains, settle_steps, steps, t))
+            .map_err(run::Failure::Error),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
+        Err(run::Failure::Error(e)) => {
             eprintln!("error: {e}");
             ExitCode::FAILURE
+        }
+        Err(run::Failure::Diverged(e)) => {
+            eprintln!("error: {e}");
+            ExitCode::from(EXIT_DIVERGED)
         }
     }
 }

@@ -2,11 +2,15 @@
 //! scenarios and track scenarios (a `[track]` table: bed preparation, tamping, indicators).
 
 use crate::progress::Progress;
+use ballast_engine::health::{Divergence, HealthCheck};
 use ballast_engine::output::checkpoint::{
-    checkpoint_path, newest_valid_checkpoint, prune_checkpoints, write_checkpoint_with_stats,
+    checkpoint_path, list_checkpoints, newest_valid_checkpoint, prune_checkpoints,
+    write_checkpoint_with_stats,
 };
 use ballast_engine::output::vtk::VtkWriter;
-use ballast_engine::output::{series_row, write_atomic, RunStats, Summary, SERIES_HEADER};
+use ballast_engine::output::{
+    json_number, series_row, write_atomic, RunStats, Summary, SERIES_HEADER,
+};
 use ballast_engine::scenario::Scenario;
 use ballast_engine::solver::DdmSettings;
 use ballast_engine::world::{StepReport, World};
@@ -27,6 +31,21 @@ const OVERLAP_REPORT: f64 = 1e-3;
 /// Steps with such an overlap named one by one; beyond, only their number.
 const OVERLAP_LINES: u64 = 20;
 
+/// Why `ballast run` did not finish.
+#[derive(Debug)]
+pub enum Failure {
+    /// Bad input or an I/O error (exit code 1).
+    Error(String),
+    /// The health check stopped a diverging run (exit code 3); its outputs are written.
+    Diverged(String),
+}
+
+impl From<String> for Failure {
+    fn from(e: String) -> Self {
+        Failure::Error(e)
+    }
+}
+
 /// What `ballast run` was asked to do.
 pub struct RunArgs<'a> {
     /// Scenario file; `None`: `preset`, or `out/scenario.toml` when resuming.
@@ -36,6 +55,9 @@ pub struct RunArgs<'a> {
     pub out: &'a Path,
     /// Continue in `out` from its newest valid checkpoint.
     pub resume: bool,
+    /// Delete the run files a previous run left in `out` before starting (else such a folder
+    /// is refused).
+    pub overwrite: bool,
     pub steps: Option<u64>,
     pub threads: usize,
     pub subdomains: Option<[usize; 3]>,
@@ -55,6 +77,8 @@ struct Job {
     vtk_interval: u64,
     checkpoint_interval: u64,
     track: Option<TrackParts>,
+    /// Bounds of the scene as built, before any checkpoint is read (the same on resume).
+    health: HealthCheck,
 }
 
 /// The track-specific parts of a run.
@@ -77,6 +101,69 @@ fn apply_subdomains(ddm: &mut Option<DdmSettings>, dims: Option<[usize; 3]>) {
             }),
         };
     }
+}
+
+/// The files and folders a run writes in its folder (all that `--overwrite` deletes).
+const RUN_FILES: [&str; 11] = [
+    "scenario.toml",
+    "summary.json",
+    "series.csv",
+    "report.md",
+    "grains.pvd",
+    "bodies.pvd",
+    "contacts.pvd",
+    "vtk",
+    "checkpoints",
+    "plots",
+    "sections",
+];
+
+/// What a previous run left in `out` that a new run would mix with: the run files present,
+/// with the number of checkpoints.
+fn previous_run(out: &Path) -> Vec<String> {
+    let mut found = Vec::new();
+    for name in ["scenario.toml", "summary.json", "series.csv"] {
+        if out.join(name).exists() {
+            found.push(name.to_string());
+        }
+    }
+    match list_checkpoints(&out.join("checkpoints")) {
+        Ok(l) if !l.is_empty() => found.push(format!("{} checkpoint(s)", l.len())),
+        _ => {}
+    }
+    found
+}
+
+/// Makes `out` a folder that belongs to the run about to start: refused when it holds another
+/// run's files (its checkpoints would be resumed, its rows mixed with the new ones), unless
+/// `overwrite`, which deletes exactly the files a run writes ([`RUN_FILES`]) and nothing else.
+fn claim_folder(out: &Path, overwrite: bool) -> Result<(), String> {
+    let found = previous_run(out);
+    if !found.is_empty() {
+        if !overwrite {
+            return Err(format!(
+                "--out {}: the folder holds another run ({}); continue it with \
+                 `ballast run --resume {}`, write to another folder, or add --overwrite to \
+                 delete that run's files first",
+                out.display(),
+                found.join(", "),
+                out.display()
+            ));
+        }
+        for name in RUN_FILES {
+            let p = out.join(name);
+            let removed = if p.is_dir() {
+                std::fs::remove_dir_all(&p)
+            } else if p.exists() {
+                std::fs::remove_file(&p)
+            } else {
+                Ok(())
+            };
+            removed.map_err(|e| format!("--overwrite: cannot delete {}: {e}", p.display()))?;
+        }
+    }
+    std::fs::create_dir_all(out)
+        .map_err(|e| format!("cannot create output folder {}: {e}", out.display()))
 }
 
 /// Reads the scenario (file, preset, or the run folder's copy when resuming) and builds it.
@@ -167,6 +254,11 @@ fn job(a: &RunArgs) -> Result<Job, String> {
             steps,
         );
         Ok(Job {
+            health: ballast_engine::scenario::health_check(
+                &model.world,
+                sim.max_speed,
+                sim.max_overlap,
+            ),
             steps,
             output_interval: sim.output_interval,
             vtk_interval: sim.vtk_interval,
@@ -185,9 +277,16 @@ fn job(a: &RunArgs) -> Result<Job, String> {
     } else {
         let mut scenario = Scenario::from_toml(&text).map_err(|e| format!("{source}: {e}"))?;
         apply_subdomains(&mut scenario.ddm, a.subdomains);
+        // The run folder's copy says how the run was made, --subdomains included, so that a
+        // plain --resume rebuilds the same scene.
+        let text = match a.subdomains {
+            Some(_) => scenario.to_toml().map_err(|e| e.to_string())?,
+            None => text,
+        };
         let world = scenario.build().map_err(|e| format!("{source}: {e}"))?;
         let sim = &scenario.simulation;
         Ok(Job {
+            health: scenario.health_check(&world),
             steps: a.steps.unwrap_or_else(|| scenario.steps()),
             output_interval: sim.output_interval,
             vtk_interval: sim.vtk_interval,
@@ -202,8 +301,14 @@ fn job(a: &RunArgs) -> Result<Job, String> {
 
 /// Runs a scenario (file or preset) up to its step count (or `--steps`), writing
 /// `scenario.toml`, `summary.json`, `series.csv`, ParaView frames and checkpoints in `out`.
-pub fn run(a: &RunArgs) -> Result<(), String> {
+pub fn run(a: &RunArgs) -> Result<(), Failure> {
     let out = a.out;
+    if !a.resume {
+        // Before the bed is prepared (minutes): a refusal should come at once.
+        if !a.overwrite && !previous_run(a.out).is_empty() {
+            claim_folder(a.out, false)?;
+        }
+    }
     let Job {
         mut world,
         source,
@@ -213,7 +318,21 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
         vtk_interval,
         checkpoint_interval,
         track,
+        health,
     } = job(a)?;
+    if let Some(d) = &world.settings.ddm {
+        let grains = (0..world.bodies.len())
+            .filter(|&i| world.bodies.kind[i] == ballast_engine::bodies::BodyKind::Dynamic)
+            .count();
+        d.check_grains(grains).map_err(|e| {
+            let flag = if a.subdomains.is_some() {
+                "--subdomains"
+            } else {
+                "ddm"
+            };
+            format!("{source}: {flag}: {e}")
+        })?;
+    }
     let io = |e: std::io::Error| format!("write error in {}: {e}", out.display());
     let ckpt_dir = out.join("checkpoints");
     let series_path = out.join("series.csv");
@@ -227,10 +346,15 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     // The indicators of the last row, reused by the summary (they clip every grain near a
     // control volume: not worth computing twice).
     let mut last_indicators: Option<(u64, Vec<f64>)> = None;
-    let mut row = |r: &StepReport, world: &World| {
+    let mut row = |r: &StepReport, world: &World, healthy: bool| {
         let mut line = series_row(r, world.bodies.kinetic_energy());
         if let Some(t) = &track {
-            let values = t.indicators.values(world);
+            // A diverged state's indicators mean nothing (and its grains may be NaN).
+            let values = if healthy {
+                t.indicators.values(world)
+            } else {
+                vec![f64::NAN; t.indicators.names().len()]
+            };
             for v in &values {
                 line.push_str(&format!(",{v:.9e}"));
             }
@@ -249,8 +373,25 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
                 "--resume {}: no valid checkpoint in {}",
                 out.display(),
                 ckpt_dir.display()
-            ));
+            )
+            .into());
         };
+        if steps < r.step {
+            return Err(format!(
+                "--resume {}: {} asks for {steps} steps, but the run is already at step {} \
+                 (its newest checkpoint, {}); ask for more than {} to continue it",
+                out.display(),
+                if a.steps.is_some() {
+                    "--steps"
+                } else {
+                    "the scenario"
+                },
+                r.step,
+                r.path.display(),
+                r.step
+            )
+            .into());
+        }
         stats = r.stats.unwrap_or_default();
         if !a.quiet {
             eprintln!("resuming from {} (step {})", r.path.display(), r.step);
@@ -267,19 +408,28 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
                     .is_some_and(|s| s <= r.step)
             })
             .collect();
-        let mut f = std::io::BufWriter::new(std::fs::File::create(&series_path).map_err(io)?);
-        writeln!(f, "{header}").map_err(io)?;
+        // Written whole and renamed into place before anything is appended: a resume killed
+        // (or out of disk) before its next checkpoint still leaves every row up to this one.
+        let mut kept_text = format!("{header}\n");
         for l in kept {
-            writeln!(f, "{l}").map_err(io)?;
+            kept_text.push_str(l);
+            kept_text.push('\n');
         }
+        write_atomic(&series_path, kept_text.as_bytes()).map_err(io)?;
+        let f = std::io::BufWriter::new(
+            std::fs::OpenOptions::new()
+                .append(true)
+                .open(&series_path)
+                .map_err(io)?,
+        );
         let vtk = VtkWriter::resume(out, world.time).map_err(io)?;
         (f, vtk)
     } else {
-        std::fs::create_dir_all(out)
-            .map_err(|e| format!("cannot create output folder {}: {e}", out.display()))?;
+        claim_folder(out, a.overwrite)?;
         write_atomic(&out.join("scenario.toml"), text.as_bytes()).map_err(io)?;
         let mut f = std::io::BufWriter::new(std::fs::File::create(&series_path).map_err(io)?);
         writeln!(f, "{header}").map_err(io)?;
+        f.flush().map_err(io)?;
         let mut vtk = VtkWriter::new(out).map_err(io)?;
         if vtk_interval > 0 {
             vtk.write_frame(&world).map_err(io)?;
@@ -288,12 +438,31 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     };
     std::fs::create_dir_all(&ckpt_dir).map_err(io)?;
     let start = world.step_index;
+    // A run that starts out of bounds (a body thrown at 1e12 m/s) is stopped before its
+    // first step, naming that body rather than the grains it would hit.
+    if start == 0 {
+        if let Err(d) = health.check(&world) {
+            let value = summary_json(&world, &stats, a.threads, &track, None, Some(&d))?;
+            write_summary_and_report(out, &source, &text, &value)?;
+            return Err(diverged(&d, out));
+        }
+    }
     let mut progress = Progress::new(steps.saturating_sub(start), a.quiet);
     let mut deep_steps = 0u64;
     while world.step_index < steps {
         let r = world.step();
         stats.add(&r);
         let k = r.step;
+        if let Err(d) = health.check(&world) {
+            // Stop here: the diverged step's row is written (it shows the fault), no
+            // checkpoint or frame is, so the last checkpoint is the last healthy state.
+            progress.finish();
+            writeln!(series, "{}", row(&r, &world, false)).map_err(io)?;
+            series.flush().map_err(io)?;
+            let value = summary_json(&world, &stats, a.threads, &track, None, Some(&d))?;
+            write_summary_and_report(out, &source, &text, &value)?;
+            return Err(diverged(&d, out));
+        }
         if r.max_penetration > OVERLAP_REPORT {
             deep_steps += 1;
             if !a.quiet && deep_steps <= OVERLAP_LINES {
@@ -306,7 +475,9 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
             }
         }
         if k % output_interval == 0 || k == steps {
-            writeln!(series, "{}", row(&r, &world)).map_err(io)?;
+            // Flushed row by row: a killed run keeps every row it computed.
+            writeln!(series, "{}", row(&r, &world, true)).map_err(io)?;
+            series.flush().map_err(io)?;
         }
         if let Some(t) = &track {
             write_sections(&t.sections, k, &world, out).map_err(io)?;
@@ -339,31 +510,12 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
     .map_err(io)?;
     prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
     let summary = Summary::new(&world, &stats, a.threads);
-    let mut value = serde_json::to_value(&summary).map_err(|e| e.to_string())?;
-    if let (Some(t), Some(map)) = (&track, value.as_object_mut()) {
-        // Track runs add keys (never rename): grains, final indicators, the preparation.
-        map.insert("grains".into(), t.grains.into());
-        let values = match last_indicators {
-            Some((step, v)) if step == world.step_index => v,
-            _ => t.indicators.values(&world),
-        };
-        let finals: serde_json::Map<String, serde_json::Value> = t
-            .indicators
-            .names()
-            .iter()
-            .cloned()
-            .zip(values.into_iter().map(Into::into))
-            .collect();
-        map.insert("indicators".into(), finals.into());
-        map.insert("preparation".into(), t.preparation.clone());
-        map.insert("cycle".into(), t.cycle.clone());
-    }
-    let json = serde_json::to_string_pretty(&value).map_err(|e| e.to_string())?;
-    write_atomic(&out.join("summary.json"), json.as_bytes()).map_err(io)?;
-    // The report and its plots: a failure is a warning, the run's data is already safe.
-    if let Err(e) = crate::report::write_run_report(out, Path::new(&source), &text, &value) {
-        eprintln!("warning: report: {e}");
-    }
+    let finals = match last_indicators {
+        Some((step, v)) if step == world.step_index => Some(v),
+        _ => None,
+    };
+    let value = summary_json(&world, &stats, a.threads, &track, finals, None)?;
+    write_summary_and_report(out, &source, &text, &value)?;
     if stats.not_converged > 0 {
         eprintln!(
             "warning: NLGS did not reach tolerance {:e} in {} of {} steps (max residual {:.3e})",
@@ -380,6 +532,104 @@ pub fn run(a: &RunArgs) -> Result<(), String> {
             world.timers.total,
             out.display()
         );
+    }
+    Ok(())
+}
+
+/// The message of a run stopped by the health check: what diverged, and what is left.
+fn diverged(d: &Divergence, out: &Path) -> Failure {
+    let kept = match list_checkpoints(&out.join("checkpoints"))
+        .ok()
+        .and_then(|l| l.last().cloned())
+    {
+        Some((step, _)) => format!(
+            "its last checkpoint (step {step}) is kept: --resume {} continues from it",
+            out.display()
+        ),
+        None => "no checkpoint was written".into(),
+    };
+    Failure::Diverged(format!(
+        "{d}; the run is stopped and {kept} (a smaller simulation.dt or tighter solver \
+         settings usually help)"
+    ))
+}
+
+/// `summary.json`: the engine's [`Summary`], `status` (`"completed"`, or `"diverged"` with the
+/// `divergence`), and for track runs `grains`, the final `indicators` (`finals`, when already
+/// computed for this step), `preparation` and `cycle`.
+fn summary_json(
+    world: &World,
+    stats: &RunStats,
+    threads: usize,
+    track: &Option<TrackParts>,
+    finals: Option<Vec<f64>>,
+    diverged: Option<&Divergence>,
+) -> Result<serde_json::Value, String> {
+    let summary = Summary::new(world, stats, threads);
+    let mut value = serde_json::to_value(&summary).map_err(|e| e.to_string())?;
+    let Some(map) = value.as_object_mut() else {
+        return Ok(value);
+    };
+    // Keys are only added, never renamed.
+    map.insert(
+        "status".into(),
+        if diverged.is_some() {
+            "diverged"
+        } else {
+            "completed"
+        }
+        .into(),
+    );
+    if let Some(d) = diverged {
+        map.insert(
+            "divergence".into(),
+            serde_json::json!({
+                "step": d.step,
+                "time": json_number(d.time),
+                "quantity": d.quantity.name(),
+                "value": json_number(d.value),
+                "bound": json_number(d.bound),
+                "bodies": d.bodies,
+                "groups": d.groups,
+                "count": d.count,
+                "message": d.to_string(),
+            }),
+        );
+    }
+    if let Some(t) = track {
+        map.insert("grains".into(), t.grains.into());
+        let values = match (finals, diverged) {
+            (Some(v), _) => v,
+            (None, None) => t.indicators.values(world),
+            (None, Some(_)) => vec![f64::NAN; t.indicators.names().len()],
+        };
+        let finals: serde_json::Map<String, serde_json::Value> = t
+            .indicators
+            .names()
+            .iter()
+            .cloned()
+            .zip(values.into_iter().map(json_number))
+            .collect();
+        map.insert("indicators".into(), finals.into());
+        map.insert("preparation".into(), t.preparation.clone());
+        map.insert("cycle".into(), t.cycle.clone());
+    }
+    Ok(value)
+}
+
+/// Writes `summary.json` (atomically), then the report and its plots, whose failure is only a
+/// warning: the run's data is already safe.
+fn write_summary_and_report(
+    out: &Path,
+    source: &str,
+    text: &str,
+    value: &serde_json::Value,
+) -> Result<(), String> {
+    let json = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
+    write_atomic(&out.join("summary.json"), json.as_bytes())
+        .map_err(|e| format!("write error in {}: {e}", out.display()))?;
+    if let Err(e) = crate::report::write_run_report(out, Path::new(source), text, value) {
+        eprintln!("warning: report: {e}");
     }
     Ok(())
 }

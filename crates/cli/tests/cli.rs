@@ -84,6 +84,7 @@ fn run_writes_summary_and_series_and_is_reproducible() {
         assert!(sa["timings_s"][key].as_f64().unwrap() >= 0.0);
     }
     assert_eq!(sa["steps"], 60);
+    assert_eq!(sa["status"], "completed");
     assert_eq!(sa["bodies"], 305);
     // Same scene, 1 or 2 threads: bit-identical final state.
     assert_eq!(sa["state_digest"], sb["state_digest"]);
@@ -358,4 +359,332 @@ fn scaling_study_times_the_listed_thread_counts() {
         err.contains("--thread-counts") && err.contains("≥ 1"),
         "{err}"
     );
+}
+
+/// `examples/pile.toml` with `replace` applied (each pair, which must occur), written to
+/// `dir/name`.
+fn pile_variant(dir: &std::path::Path, name: &str, replace: &[(&str, &str)]) -> PathBuf {
+    let mut text = std::fs::read_to_string(example("pile.toml")).unwrap();
+    for (a, b) in replace {
+        assert!(text.contains(a), "{a}");
+        text = text.replacen(a, b, 1);
+    }
+    std::fs::create_dir_all(dir).unwrap();
+    let f = dir.join(name);
+    std::fs::write(&f, text).unwrap();
+    f
+}
+
+fn checkpoint_steps(dir: &std::path::Path) -> Vec<u64> {
+    let mut steps: Vec<u64> = std::fs::read_dir(dir.join("checkpoints"))
+        .map(|d| {
+            d.filter_map(|e| {
+                let name = e.ok()?.file_name().into_string().ok()?;
+                name.strip_prefix("checkpoint_")?
+                    .strip_suffix(".bin")?
+                    .parse()
+                    .ok()
+            })
+            .collect()
+        })
+        .unwrap_or_default();
+    steps.sort_unstable();
+    steps
+}
+
+/// A diverging run stops at once with exit code 3, names the step, the body, its group and the
+/// quantity, writes `summary.json` with `"status": "diverged"` (infinite numbers as strings,
+/// not `null`) and no checkpoint of the diverged state; a normal run says `"completed"`.
+#[test]
+fn diverging_runs_stop_with_exit_code_3() {
+    let dir = tmp("diverge");
+    let gravity = pile_variant(
+        &dir,
+        "gravity.toml",
+        &[("gravity = [0, 0, -9.81]", "gravity = [0, 0, -1e200]")],
+    );
+    // A box above the grains' lattice, thrown sideways: nothing to hit in its first steps.
+    let thrown = pile_variant(
+        &dir,
+        "thrown.toml",
+        &[(
+            "[[grains]]",
+            "[[body]]\nshape = \"box\"\ngroup = \"projectile\"\nmaterial = \"stone\"\n\
+             half_extents = [0.02, 0.02, 0.02]\ncenter = [0.1, 0.1, 5]\n\
+             velocity = [1e12, 0, 0]\n\n[[grains]]",
+        )],
+    );
+    // The thrown box is named before the first step, not the grains it would launch.
+    for (file, step, body, value) in [
+        (&gravity, 1, "group \"grain\"", "2.000e196 m/s"),
+        (&thrown, 0, "body 5 (group \"projectile\")", "1.000e12 m/s"),
+    ] {
+        let out_dir = dir.join(file.file_stem().unwrap());
+        let start = std::time::Instant::now();
+        let out = ballast()
+            .arg("run")
+            .arg(file)
+            .arg("--out")
+            .arg(&out_dir)
+            .arg("--quiet")
+            .output()
+            .unwrap();
+        let elapsed = start.elapsed().as_secs_f64();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(3), "{err}");
+        let at = match step {
+            0 => "the initial state (step 0) is out of bounds",
+            _ => "diverged at step 1 ",
+        };
+        for part in [at, body, value, "no checkpoint was written"] {
+            assert!(err.contains(part), "{part}: {err}");
+        }
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(elapsed < 10.0, "{elapsed} s");
+        let s = summary(&out_dir);
+        assert_eq!(s["status"], "diverged");
+        assert_eq!(s["steps"], step);
+        assert_eq!(s["divergence"]["step"], step);
+        assert_eq!(s["divergence"]["quantity"], "speed");
+        assert!(s["divergence"]["message"].as_str().unwrap().contains(body));
+        assert_eq!(checkpoint_steps(&out_dir), Vec::<u64>::new());
+        // The diverged step's row is written: the last thing the run saw. Infinite kinetic
+        // energy is written as such, never as null.
+        let csv = std::fs::read_to_string(out_dir.join("series.csv")).unwrap();
+        let last = csv.lines().last().unwrap();
+        if step == 1 {
+            assert!(last.starts_with("1,"), "{csv}");
+            assert_eq!(s["kinetic_energy"], "inf", "{}", s["kinetic_energy"]);
+        } else {
+            assert!(last.starts_with("step,"), "{csv}");
+        }
+    }
+
+    // `max_speed = 0.5` m/s: the falling grains pass it at step 255 (9.81 m/s² × 255 × 2e-4
+    // s = 0.5003 m/s); the checkpoints up to step 250 are kept, none after, and a resume
+    // diverges again at the same step.
+    let slow = pile_variant(
+        &dir,
+        "slow.toml",
+        &[(
+            "output_interval = 50",
+            "output_interval = 50\ncheckpoint_interval = 50\nmax_speed = 0.5",
+        )],
+    );
+    let d = dir.join("slow");
+    for resume in [false, true] {
+        let mut cmd = ballast();
+        cmd.arg("run").arg(&slow).arg("--quiet");
+        cmd.arg(if resume { "--resume" } else { "--out" }).arg(&d);
+        let out = cmd.output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(3), "{err}");
+        assert!(
+            err.contains("diverged at step 255 ")
+                && err.contains("more than the bound 0.5 m/s (set by [simulation] max_speed)")
+                && err.contains("its last checkpoint (step 250) is kept"),
+            "{err}"
+        );
+        assert_eq!(checkpoint_steps(&d), [150, 200, 250]);
+        assert_eq!(summary(&d)["divergence"]["step"], 255);
+    }
+}
+
+/// Runs `ballast run ARGS --quiet`: (exit code, stderr).
+fn run_args(args: &[&std::ffi::OsStr]) -> (Option<i32>, String) {
+    let out = ballast()
+        .arg("run")
+        .args(args)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// A folder holding a run is refused to another run (unless `--overwrite`, which leaves a
+/// clean folder: the same result as a fresh one), and a checkpoint never resumes under a
+/// scenario that started from another state, even with the same bodies.
+#[test]
+fn run_folders_belong_to_one_run() {
+    let dir = tmp("owned");
+    let a = example("pile.toml");
+    // Same bodies, the grains 1 mm higher: same scene, another initial state.
+    let b = pile_variant(
+        &dir,
+        "b.toml",
+        &[("min = [0, 0, 0.002]", "min = [0, 0, 0.003]")],
+    );
+    let (d, e) = (dir.join("d"), dir.join("e"));
+    let os = |s: &str| std::ffi::OsString::from(s);
+    let steps = [os("--steps"), os("10")];
+    let args = |file: &PathBuf, flag: &str, folder: &PathBuf, more: &[&str]| {
+        let mut v: Vec<std::ffi::OsString> =
+            vec![file.clone().into(), os(flag), folder.clone().into()];
+        v.extend(steps.iter().cloned());
+        v.extend(more.iter().map(|s| os(s)));
+        v
+    };
+    let call = |v: Vec<std::ffi::OsString>| {
+        let refs: Vec<&std::ffi::OsStr> = v.iter().map(|s| s.as_os_str()).collect();
+        run_args(&refs)
+    };
+    assert_eq!(call(args(&a, "--out", &d, &[])).0, Some(0));
+    let digest_a = summary(&d)["state_digest"].clone();
+    // Another run into the same folder: refused, the folder untouched.
+    let (code, err) = call(args(&b, "--out", &d, &[]));
+    assert_eq!(code, Some(1), "{err}");
+    for part in [
+        "holds another run",
+        "scenario.toml",
+        "1 checkpoint(s)",
+        "--resume",
+        "--overwrite",
+    ] {
+        assert!(err.contains(part), "{part}: {err}");
+    }
+    assert_eq!(summary(&d)["state_digest"], digest_a);
+    // The same scenario again is refused too: a folder is one run.
+    assert_eq!(call(args(&a, "--out", &d, &[])).0, Some(1));
+    // --overwrite: the folder now holds B alone, as a fresh folder would.
+    std::fs::write(d.join("notes.txt"), "mine").unwrap();
+    assert_eq!(call(args(&b, "--out", &d, &["--overwrite"])).0, Some(0));
+    assert_eq!(call(args(&b, "--out", &e, &[])).0, Some(0));
+    assert_eq!(summary(&d)["state_digest"], summary(&e)["state_digest"]);
+    assert_ne!(summary(&d)["state_digest"], digest_a);
+    // Same rows (the last columns are wall-clock times).
+    let rows = |dir: &PathBuf| -> Vec<String> {
+        std::fs::read_to_string(dir.join("series.csv"))
+            .unwrap()
+            .lines()
+            .map(|l| l.split(',').take(9).collect::<Vec<_>>().join(","))
+            .collect()
+    };
+    assert_eq!(rows(&d), rows(&e));
+    assert_eq!(checkpoint_steps(&d), [10]);
+    assert_eq!(
+        std::fs::read_to_string(d.join("notes.txt")).unwrap(),
+        "mine",
+        "--overwrite deletes the run's files only"
+    );
+    // B's checkpoints under A's scenario.toml: refused, naming the initial state.
+    std::fs::copy(&a, d.join("scenario.toml")).unwrap();
+    let (code, err) = call(vec![
+        os("--resume"),
+        d.clone().into(),
+        os("--steps"),
+        os("20"),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("another initial state"), "{err}");
+    assert_eq!(checkpoint_steps(&d), [10]);
+}
+
+/// A resume keeps every row up to its checkpoint whatever happens next: killed before its
+/// next checkpoint, the rows it had computed are there too (flushed as written).
+#[test]
+fn a_killed_resume_keeps_the_history() {
+    let d = tmp("killed");
+    let f = example("pile.toml");
+    let st = ballast()
+        .arg("run")
+        .arg(&f)
+        .args(["--steps", "700", "--quiet", "--out"])
+        .arg(d.as_path())
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let before = std::fs::read_to_string(d.join("series.csv")).unwrap();
+    assert_eq!(before.lines().count(), 1 + 14, "rows at 50, 100, …, 700");
+    // The scenario's next checkpoint would be at step 1000.
+    let mut child = ballast()
+        .arg("run")
+        .arg(&f)
+        .args(["--steps", "100000", "--quiet", "--resume"])
+        .arg(d.as_path())
+        .spawn()
+        .unwrap();
+    let last_step = |text: &str| -> u64 {
+        text.lines()
+            .last()
+            .and_then(|l| l.split(',').next())
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(0)
+    };
+    let start = std::time::Instant::now();
+    let mut seen = 0;
+    while seen <= 700 && start.elapsed().as_secs() < 120 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+        seen = last_step(&std::fs::read_to_string(d.join("series.csv")).unwrap_or_default());
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let after = std::fs::read_to_string(d.join("series.csv")).unwrap();
+    let n = last_step(&after);
+    assert!(
+        n > 700 && n < 1000,
+        "a row after step 700 should be on disk before the checkpoint at 1000: last row {n}"
+    );
+    assert!(after.starts_with(&before), "rows up to the checkpoint lost");
+    assert_eq!(checkpoint_steps(&d), [700]);
+}
+
+/// `--subdomains` is part of the run: a plain `--resume` continues it; a resume asking for
+/// fewer steps than are done, `--steps 1e3` and an absurd `--threads` are clear errors.
+#[test]
+fn resume_flags_are_checked() {
+    let d = tmp("flags");
+    let f = example("pile.toml");
+    let run = |args: &[&str]| -> (Option<i32>, String) {
+        let out = ballast()
+            .arg("run")
+            .args(args)
+            .arg("--quiet")
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (f, ds) = (f.to_str().unwrap(), d.to_str().unwrap());
+    let (code, err) = run(&[f, "--steps", "30", "--subdomains", "2x2x1", "--out", ds]);
+    assert_eq!(code, Some(0), "{err}");
+    let (code, err) = run(&["--resume", ds, "--steps", "40"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert_eq!(summary(&d)["subdomains"], "2x2x1");
+    assert_eq!(summary(&d)["steps"], 40);
+    let (code, err) = run(&["--resume", ds, "--steps", "3"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("--steps asks for 3 steps") && err.contains("already at step 40"),
+        "{err}"
+    );
+    assert_eq!(summary(&d)["steps"], 40);
+    let (code, err) = run(&[f, "--steps", "1e3", "--out", ds]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("--steps") && err.contains("whole number"),
+        "{err}"
+    );
+    let sub = tmp("flags-sub");
+    let (code, err) = run(&[
+        f,
+        "--subdomains",
+        "4096x4096x1",
+        "--out",
+        sub.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("--subdomains: subdomains = 4096x4096x1 (16777216 subdomains) for 300 grains"),
+        "{err}"
+    );
+    let start = std::time::Instant::now();
+    let (code, err) = run(&[f, "--threads", "100000", "--out", ds]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(err.contains("--threads = 100000: must be at most"), "{err}");
+    assert!(start.elapsed().as_secs() < 10);
 }

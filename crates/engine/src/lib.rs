@@ -10,7 +10,8 @@
 //! 5. [`laws`]: the Signorini-Coulomb law, friction table and the exact local 3×3 solver;
 //! 6. [`solver`]: Delassus blocks and Non-Linear Gauss-Seidel (NLGS);
 //! 7. [`world`]: the θ-method time step tying it all together, with per-phase timers;
-//! 8. [`scenario`]: TOML scenario files, validated field by field.
+//! 8. [`scenario`]: TOML scenario files, validated field by field;
+//! 9. [`health`]: the check after every step that stops a diverging run, naming the bodies.
 //!
 //! Conventions: SI units; a contact joins body 1 and body 2, its normal `n` points from body 1
 //! toward body 2; the gap `g` is positive when the surfaces are apart; the relative velocity is
@@ -21,6 +22,7 @@ pub mod bodies;
 pub mod contacts;
 pub mod detection;
 pub mod digest;
+pub mod health;
 pub mod laws;
 pub mod math;
 pub mod output;

@@ -104,6 +104,13 @@ pub struct World {
     pub step_index: u64,
     /// Cumulated phase times.
     pub timers: PhaseTimes,
+    /// Names of the body groups, indexed by group number (empty when the builder gave none):
+    /// messages name a body's group with them.
+    pub group_names: Vec<String>,
+    /// [`initial_state_digest`] of the state the run started from, recorded at its first step
+    /// (or read from the checkpoint it resumed from): checkpoints carry it, so a checkpoint is
+    /// never resumed under a scenario with another initial state.
+    pub(crate) origin: Option<u64>,
     pub(crate) detector: Detector,
     raw: Vec<RawContact>,
     previous: ContactSet,
@@ -141,6 +148,8 @@ impl World {
             time: 0.0,
             step_index: 0,
             timers: PhaseTimes::default(),
+            group_names: Vec::new(),
+            origin: None,
             detector: Detector::default(),
             raw: Vec::new(),
             previous: ContactSet::default(),
@@ -190,6 +199,22 @@ impl World {
     /// The driver of body `i` if it is a force-limited driven body this step.
     pub fn force_limited(&self, i: usize) -> Option<&crate::bodies::Driver> {
         force_limited(&self.bodies, i)
+    }
+
+    /// The name of group `g` (its number when the builder gave no names).
+    pub fn group_name(&self, g: u32) -> String {
+        self.group_names
+            .get(g as usize)
+            .cloned()
+            .unwrap_or_else(|| g.to_string())
+    }
+
+    /// The digest of the state this run started from: recorded at the first step, read from
+    /// the checkpoint a run resumed from, or, before the first step, that of the current state.
+    /// `None` for a world stepped from a checkpoint written before this was recorded.
+    pub fn origin_digest(&self) -> Option<u64> {
+        self.origin
+            .or_else(|| (self.step_index == 0).then(|| initial_state_digest(&self.bodies)))
     }
 
     /// The force-limited drives of the last step, in body order: `impulse_v / dt` is the force
@@ -285,6 +310,9 @@ impl World {
     /// Steps 1–3 up to the local problems: detection at `qᵢ` with warm start, free velocities,
     /// local problems. Returns the largest overlap and the phase times so far.
     pub fn prepare(&mut self) -> (f64, PhaseTimes) {
+        if self.origin.is_none() && self.step_index == 0 {
+            self.origin = Some(initial_state_digest(&self.bodies));
+        }
         self.refresh_attach();
         let s = &self.settings;
         let h = s.dt;
@@ -519,6 +547,25 @@ impl World {
             times,
         }
     }
+}
+
+/// 64-bit FNV-1a over the exact bits of every body's position, orientation, velocity and
+/// angular velocity: what distinguishes two runs of the same scene that start differently.
+pub fn initial_state_digest(bodies: &BodySet) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for i in 0..bodies.len() {
+        let (p, q) = (bodies.position[i], bodies.orientation[i]);
+        let (v, w) = (bodies.velocity[i], bodies.angular_velocity[i]);
+        for x in [
+            p.x, p.y, p.z, q.x, q.y, q.z, q.w, v.x, v.y, v.z, w.x, w.y, w.z,
+        ] {
+            for b in x.to_bits().to_le_bytes() {
+                h ^= u64::from(b);
+                h = h.wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+    }
+    h
 }
 
 /// The driver of body `i` if it is driven (not yet released) with a force limit.

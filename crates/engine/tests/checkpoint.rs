@@ -640,11 +640,14 @@ fn checkpoints_cover_all_state_fields() {
             "time",
             "step_index",
             "timers",
+            // the digest of the run's initial state
+            "origin",
             // its anchor poses (the rest of it is rebuilt every step)
             "detector",
             // from the scenario
             "friction",
             "settings",
+            "group_names",
             // rebuilt every step (`previous` is swapped with `contacts` first thing; the
             // drives start from zero impulse each step, and `attach` comes from the drivers)
             "raw",
@@ -696,47 +699,104 @@ fn checkpoints_cover_all_state_fields() {
     );
 }
 
-/// A version 1 file (written before the detection's anchor poses were stored) still reads: the
-/// run resumes with every body anchored anew at its first step. The same bytes labelled version
-/// 1 with the anchor section left in are refused as malformed, not misread.
+/// Version 1 and 2 files (written before the detection's anchor poses, resp. the run's
+/// origin, were stored) still read: a version 1 run resumes with every body anchored anew at
+/// its first step, and neither is checked against the initial state. The same bytes labelled
+/// an older version with the newer sections left in are refused as malformed, not misread.
 #[test]
-fn version_1_files_still_read() {
+fn version_1_and_2_files_still_read() {
     let s = scenario();
     let mut w = build(&s);
     run(&mut w, SPLIT, &mut RunStats::default());
-    let v2 = encode_checkpoint(&w, None);
-    // Payload tail: anchor flag 1, n positions (24 bytes), n orientations (32 bytes), then the
-    // statistics flag 0; then the checksum.
+    let v3 = encode_checkpoint(&w, None);
+    // Payload tail: anchor flag 1, n positions (24 bytes), n orientations (32 bytes), origin
+    // flag 1 and its u64, then the statistics flag 0; then the checksum.
     let anchors = 1 + 56 * w.bodies.len();
-    let end = v2.len() - 8;
-    assert_eq!((v2[end - 1 - anchors], v2[end - 1]), (1, 0));
-    let relabel = |mut b: Vec<u8>| {
-        b[11..15].copy_from_slice(&1u32.to_le_bytes());
+    let origin = 1 + 8;
+    let end = v3.len() - 8;
+    assert_eq!(
+        (
+            v3[end - 1 - origin - anchors],
+            v3[end - 1 - origin],
+            v3[end - 1]
+        ),
+        (1, 1, 0)
+    );
+    let relabel = |mut b: Vec<u8>, version: u32| {
+        b[11..15].copy_from_slice(&version.to_le_bytes());
         let payload = (b.len() - 23) as u64;
         b[15..23].copy_from_slice(&payload.to_le_bytes());
         b.extend_from_slice(&[0; 8]);
         reseal(&mut b);
         b
     };
-    let mut v1 = v2[..end - 1 - anchors].to_vec();
+    let mut v2 = v3[..end - 1 - origin].to_vec();
+    v2.push(0);
+    let mut v1 = v3[..end - 1 - origin - anchors].to_vec();
     v1.push(0);
     let dir = tmp("version1");
-    let path = dir.join("v1.bin");
-    write_bytes(&path, &relabel(v1));
-    let mut resumed = build(&s);
-    read_checkpoint(&path, &mut resumed).expect("a version 1 file reads");
-    assert_eq!(state_digest(&resumed.bodies), state_digest(&w.bodies));
-    assert_eq!(resumed.step_index, w.step_index);
-    resumed.step();
-    assert!(
-        resumed.contacts.len() > 5,
-        "{} contacts",
-        resumed.contacts.len()
-    );
+    for (version, bytes) in [(1, v1), (2, v2)] {
+        let path = dir.join(format!("v{version}.bin"));
+        write_bytes(&path, &relabel(bytes, version));
+        let mut resumed = build(&s);
+        read_checkpoint(&path, &mut resumed).expect("an older version reads");
+        assert_eq!(state_digest(&resumed.bodies), state_digest(&w.bodies));
+        assert_eq!(resumed.step_index, w.step_index);
+        // No origin in the file: unknown, not made up.
+        assert_eq!(resumed.origin_digest(), None);
+        resumed.step();
+        assert!(
+            resumed.contacts.len() > 5,
+            "{} contacts",
+            resumed.contacts.len()
+        );
+    }
 
-    let e = read_damaged(&dir, "mislabelled.bin", &relabel(v2[..end].to_vec()));
-    assert!(
-        matches!(e, CheckpointError::Corrupted { .. }),
-        "a version 2 payload read as version 1: {e:?}"
-    );
+    for version in [1, 2] {
+        let e = read_damaged(
+            &dir,
+            &format!("mislabelled{version}.bin"),
+            &relabel(v3[..end].to_vec(), version),
+        );
+        assert!(
+            matches!(e, CheckpointError::Corrupted { .. }),
+            "a version 3 payload read as version {version}: {e:?}"
+        );
+    }
+}
+
+/// A checkpoint carries the state its run started from: the same scene started elsewhere (the
+/// grains 1 mm higher, or one grain thrown) refuses it, naming the initial state; the run's
+/// own scenario reads it, and the checkpoints it writes later carry the same origin.
+#[test]
+fn checkpoint_of_another_initial_state_is_refused() {
+    let dir = tmp("origin");
+    let path = dir.join("c.bin");
+    write_bytes(&path, &at_split().bytes);
+    let mut moved = scenario();
+    moved.grains[0].pack.min[2] += 1e-3;
+    let mut thrown = build(&scenario());
+    thrown.bodies.velocity[7] = DVec3::new(0.1, 0.0, 0.0);
+    for (what, mut w) in [("moved", build(&moved)), ("thrown", thrown)] {
+        let before = state_digest(&w.bodies);
+        let e = read_checkpoint(&path, &mut w).unwrap_err();
+        assert_eq!(state_digest(&w.bodies), before, "{what}");
+        let msg = e.to_string();
+        assert!(
+            matches!(e, CheckpointError::SceneMismatch { .. })
+                && msg.contains("another initial state"),
+            "{what}: {msg}"
+        );
+    }
+    let mut w = build(&scenario());
+    let origin = w.origin_digest();
+    assert!(origin.is_some());
+    read_checkpoint(&path, &mut w).expect("its own scenario reads it");
+    assert_eq!(w.origin_digest(), origin);
+    w.step();
+    let again = dir.join("again.bin");
+    write_checkpoint(&w, &again).unwrap();
+    let mut fresh = build(&scenario());
+    read_checkpoint(&again, &mut fresh).expect("a resumed run's checkpoint reads");
+    assert_eq!(fresh.step_index, SPLIT + 1);
 }

@@ -87,6 +87,40 @@ fn mistakes_name_the_field() {
             "center = [0, 0, 0.05]\nvertices = [[0, 0, 0]]",
             &["body[1].vertices", "not allowed"],
         ),
+        // Friction pairs: groups must exist, pairs are pairs, one coefficient per pair.
+        (
+            "default = 0.8",
+            "default = 0.8\npairs = [{ groups = [\"default\", \"grian\"], mu = 0.5 }]",
+            &[
+                "friction.pairs[0].groups",
+                "\"grian\"",
+                "no [[body]] or [[grains]] has",
+                "(groups: \"default\")",
+            ],
+        ),
+        (
+            "default = 0.8",
+            "default = 0.8\npairs = [{ groups = [\"default\", \"default\", \"default\"], mu = 0.5 }]",
+            &["friction.pairs[0].groups has 3 entries", "exactly two"],
+        ),
+        (
+            "default = 0.8",
+            "default = 0.8\npairs = [{ groups = [\"default\", \"default\"], mu = 0.5 }, \
+             { groups = [\"default\", \"default\"], mu = 0.5 }, \
+             { groups = [\"default\", \"default\"], mu = 0.7 }]",
+            &["friction.pairs[2]", "mu = 0.7", "friction.pairs[0]", "mu = 0.5"],
+        ),
+        // [body] for [[body]]: say so.
+        (
+            "[[body]]\nshape = \"box\"",
+            "[body]\nshape = \"box\"",
+            &["[body] is a single table: use [[body]]"],
+        ),
+        (
+            "steps = 10",
+            "steps = 10\nmax_speed = -1",
+            &["simulation.max_speed = -1", "> 0"],
+        ),
     ];
     for (from, to, needles) in cases {
         assert!(BASE.contains(from), "bad test case {from}");
@@ -153,4 +187,65 @@ fn driver_terms_and_validation() {
     };
     let msg = bad.validate().unwrap_err();
     assert!(msg.contains("wy[0]") && msg.contains("end"), "{msg}");
+}
+
+/// `Scenario::to_toml` reads back equal, for every example and with a `[ddm]` table added
+/// (what `ballast run --subdomains` writes to the run folder).
+#[test]
+fn scenarios_round_trip_through_toml() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        if path.extension().is_none_or(|e| e != "toml") || text.contains("[track]") {
+            continue;
+        }
+        let mut s = Scenario::from_toml(&text).unwrap();
+        for ddm in [None, Some([2, 2, 1])] {
+            if let Some(d) = ddm {
+                s.ddm = Some(ballast_engine::solver::DdmSettings {
+                    subdomains: d,
+                    ..Default::default()
+                });
+            }
+            let back = Scenario::from_toml(&s.to_toml().unwrap()).unwrap();
+            assert_eq!(back, s, "{}", path.display());
+        }
+        n += 1;
+    }
+    assert!(n >= 2, "{n} examples");
+}
+
+/// A grain count beyond the machine's memory is refused before anything is allocated, with
+/// the estimate; within it, the scenario builds.
+#[test]
+fn grain_counts_are_checked_against_memory() {
+    let text = std::fs::read_to_string(format!(
+        "{}/../../examples/pile.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap();
+    let s = Scenario::from_toml(&text.replace("count = 300", "count = 1000000000000")).unwrap();
+    // 1e12 grains of at most 20 vertices: 9 kB each, 9 PB.
+    assert_eq!(s.memory_estimate() / 1_000_000_000_000, 9_000);
+    let e = s
+        .check_memory(Some(16_000_000_000))
+        .unwrap_err()
+        .to_string();
+    for part in [
+        "grains[0].count = 1000000000000",
+        "about 9.0 PB",
+        "16.0 GB available",
+    ] {
+        assert!(e.contains(part), "{part}: {e}");
+    }
+    let s = Scenario::from_toml(&text).unwrap();
+    assert!(s.memory_estimate() < 3_000_000, "{}", s.memory_estimate());
+    s.check_memory(Some(16_000_000_000)).unwrap();
+    if ballast_engine::scenario::available_memory().is_some() {
+        let big = Scenario::from_toml(&text.replace("count = 300", "count = 1000000000000"));
+        let e = big.unwrap().build().unwrap_err().to_string();
+        assert!(e.contains("grains[0].count"), "{e}");
+    }
 }

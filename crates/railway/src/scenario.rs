@@ -64,6 +64,14 @@ pub struct TrackSimulation {
     pub output_interval: u64,
     pub vtk_interval: u64,
     pub checkpoint_interval: u64,
+    /// Health check: speed (m/s) beyond which the run is stopped as diverged; `None` = the
+    /// default bound of `ballast_engine::health`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_speed: Option<f64>,
+    /// Health check: overlap (m) beyond which the run is stopped as diverged; `None` = the
+    /// default bound (a fraction of the smaller inradius of the two bodies).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_overlap: Option<f64>,
 }
 
 impl Default for TrackSimulation {
@@ -78,6 +86,8 @@ impl Default for TrackSimulation {
             output_interval: 25,
             vtk_interval: 125,
             checkpoint_interval: 500,
+            max_speed: None,
+            max_overlap: None,
         }
     }
 }
@@ -428,6 +438,14 @@ impl TrackScenario {
         if s.output_interval == 0 {
             return Err(refuse("simulation.output_interval", 0, "≥ 1 step").to_string());
         }
+        for (field, v) in [
+            ("simulation.max_speed", s.max_speed),
+            ("simulation.max_overlap", s.max_overlap),
+        ] {
+            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                return Err(refuse(field, v, "a finite number > 0").to_string());
+            }
+        }
         if s.steps == Some(0) {
             return Err(refuse(
                 "simulation.steps",
@@ -539,7 +557,8 @@ impl TrackScenario {
             self.ballast.grains.density,
         );
         let indicators = Indicators::new(&self.track, &layout, self.indicators.depth, &bodies);
-        let world = World::new(bodies, self.friction.table(), self.step_settings());
+        let mut world = World::new(bodies, self.friction.table(), self.step_settings());
+        world.group_names = crate::scene::GROUP_NAMES.map(String::from).to_vec();
         Ok(TrackModel {
             world,
             layout,

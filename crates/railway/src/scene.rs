@@ -19,6 +19,8 @@ pub const WALL: u32 = 1;
 pub const BLOCK: u32 = 2;
 /// Friction group of the tines.
 pub const TINE: u32 = 3;
+/// The names of the groups above, by number (messages name a body's group with them).
+pub const GROUP_NAMES: [&str; 4] = ["grain", "wall", "block", "tine"];
 
 /// Friction coefficients of the track model (the paper's: μ = 1 except against the walls).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

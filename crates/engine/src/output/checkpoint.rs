@@ -20,7 +20,7 @@
 //!
 //! Every `f64` is stored as its exact IEEE-754 bits: a resumed run continues bit-identically.
 //!
-//! # File format, version 2 (version 1 still read)
+//! # File format, version 3 (versions 1 and 2 still read)
 //!
 //! All integers little-endian; `f64` as the little-endian bytes of [`f64::to_bits`]; a vector is
 //! `x, y, z`; a quaternion is `x, y, z, w`. An "array" is a `u64` element count followed by the
@@ -50,11 +50,18 @@
 //! | *bodies*             | `u64` count `n`, then field by field (structure of arrays, `n` values each): positions, orientations, velocities, angular velocities, angular momenta |
 //! | *contacts*           | `u64` count `m`, then field by field (`m` values each): body 1 `u32`, body 2 `u32`, point, frame (`n, t, s`: 3 vectors), gap `f64`, μ `f64`, impulse, status `u8` (0 no contact, 1 stick, 2 slide), local point |
 //! | *anchors*            | `u8` 0 (absent) or 1 then the `n` anchor positions, then the `n` anchor orientations (version ≥ 2; a version 1 file has no such field) |
+//! | *origin*             | `u8` 0 (absent) or 1 then `u64`, the [`crate::world::initial_state_digest`] of the state the run started from (version ≥ 3; older files have no such field and are not checked) |
 //! | *run statistics*     | `u8` 0 (absent) or 1 then steps `u64`, contacts sum `u64`, contacts max `u64`, iterations sum `u64`, max residual `f64`, steps not converged `u64`, max penetration `f64` |
 //!
 //! The shape hash is [`fnv1a64`] over the shape kind and its exact geometry (vertices, faces,
 //! radius); the driver hash over the driver's JSON. Settings travel whole, as JSON, so a
 //! setting added later (domain decomposition, say) is covered without a format change.
+//!
+//! The scene says what the bodies are, not where they started: two scenarios with the same
+//! bodies placed or launched differently have the same scene. The *origin* field tells their
+//! checkpoints apart: a checkpoint is refused by a world whose run started from another state
+//! ([`World::origin_digest`]), so a run folder reused by another scenario never resumes the
+//! old trajectory.
 //!
 //! Size: 237 bytes per body plus 169 bytes per contact point, plus under 1 kB. For 1,000
 //! grains: 239 kB while they fall, 0.89 MB with 3,850 contact points (a pile settling; a
@@ -86,7 +93,7 @@ use std::path::{Path, PathBuf};
 /// The magic bytes every checkpoint starts with.
 pub const MAGIC: &[u8; 11] = b"BALLASTCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// The oldest format version this build still reads (version 1 has no anchor poses: a run
 /// resumed from it detects every pair anew at its first step).
 pub const OLDEST_VERSION: u32 = 1;
@@ -660,6 +667,14 @@ pub fn encode_checkpoint(world: &World, stats: Option<&RunStats>) -> Vec<u8> {
         p.u8(0);
     }
 
+    match world.origin_digest() {
+        Some(o) => {
+            p.u8(1);
+            p.u64(o);
+        }
+        None => p.u8(0),
+    }
+
     match stats {
         None => p.u8(0),
         Some(s) => {
@@ -732,6 +747,8 @@ struct Decoded {
     contacts: ContactSet,
     /// Detection anchor poses (version ≥ 2, when the writer had them).
     anchors: Option<(Vec<DVec3>, Vec<DQuat>)>,
+    /// Digest of the run's initial state (version ≥ 3).
+    origin: Option<u64>,
     stats: Option<RunStats>,
 }
 
@@ -833,6 +850,14 @@ fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
             f => return Err(format!("anchors flag {f} is not 0 or 1")),
         },
     };
+    let origin = match version {
+        1 | 2 => None,
+        _ => match d.u8("origin flag")? {
+            0 => None,
+            1 => Some(d.u64("origin digest")?),
+            f => return Err(format!("origin flag {f} is not 0 or 1")),
+        },
+    };
 
     let stats = match d.u8("statistics flag")? {
         0 => None,
@@ -861,6 +886,7 @@ fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
         angular_momentum,
         contacts: c,
         anchors,
+        origin,
         stats,
     })
 }
@@ -967,6 +993,18 @@ fn apply(d: Decoded, path: &Path, world: &mut World) -> Result<Option<RunStats>,
             what,
         });
     }
+    if let (Some(c), Some(w)) = (d.origin, world.origin_digest()) {
+        if c != w {
+            return Err(CheckpointError::SceneMismatch {
+                path: path.to_path_buf(),
+                what: format!(
+                    "the run started from another initial state (positions, orientations or \
+                     velocities of the bodies: digest {c:016x} in the checkpoint, {w:016x} in \
+                     the scenario)"
+                ),
+            });
+        }
+    }
     let b = &mut world.bodies;
     b.position = d.position;
     b.orientation = d.orientation;
@@ -978,6 +1016,8 @@ fn apply(d: Decoded, path: &Path, world: &mut World) -> Result<Option<RunStats>,
     world.detector.set_anchors(position, orientation);
     world.time = d.time;
     world.step_index = d.step_index;
+    // A checkpoint without an origin leaves the run's origin unknown rather than wrong.
+    world.origin = d.origin;
     // Released bodies follow the checkpoint's clock, whichever world reads it.
     for i in 0..world.bodies.len() {
         world.bodies.kind[i] = world.bodies.scene_kind(i);

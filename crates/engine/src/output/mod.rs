@@ -29,9 +29,9 @@ impl RunStats {
         self.contacts_sum += r.contacts as u64;
         self.contacts_max = self.contacts_max.max(r.contacts);
         self.iterations_sum += r.solve.iterations as u64;
-        self.max_residual = self.max_residual.max(r.solve.residual);
+        self.max_residual = honest_max(self.max_residual, r.solve.residual);
         self.not_converged += u64::from(!r.solve.converged);
-        self.max_penetration = self.max_penetration.max(r.max_penetration);
+        self.max_penetration = honest_max(self.max_penetration, r.max_penetration);
     }
 
     fn mean(sum: u64, n: u64) -> f64 {
@@ -43,10 +43,38 @@ impl RunStats {
     }
 }
 
+/// The larger of `a` and `b`, NaN as soon as either is: `f64::max` ignores a NaN, and a
+/// diverged step's NaN residual would read as the best one.
+fn honest_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
+}
+
+/// A number for JSON: finite numbers as numbers, NaN and infinities as the strings `"NaN"`,
+/// `"inf"` and `"-inf"` (JSON has no such numbers, and `serde_json` would write `null`, which
+/// reads as "absent").
+pub fn json_number(x: f64) -> serde_json::Value {
+    match serde_json::Number::from_f64(x) {
+        Some(n) => serde_json::Value::Number(n),
+        None if x.is_nan() => "NaN".into(),
+        None if x > 0.0 => "inf".into(),
+        None => "-inf".into(),
+    }
+}
+
+/// Serialises an `f64` field as [`json_number`] does.
+fn honest_f64<S: serde::Serializer>(x: &f64, s: S) -> Result<S::Ok, S::Error> {
+    json_number(*x).serialize(s)
+}
+
 /// `summary.json`: the contract users' scripts rely on (keys are only ever added).
 #[derive(Clone, Debug, Serialize)]
 pub struct Summary {
     pub steps: u64,
+    #[serde(serialize_with = "honest_f64")]
     pub time: f64,
     pub bodies: usize,
     pub threads: usize,
@@ -54,7 +82,9 @@ pub struct Summary {
     pub timings_s: PhaseTimes,
     pub contacts: ContactSummary,
     pub solver: SolverSummary,
+    #[serde(serialize_with = "honest_f64")]
     pub max_penetration: f64,
+    #[serde(serialize_with = "honest_f64")]
     pub kinetic_energy: f64,
     pub state_digest: String,
 }
@@ -62,6 +92,7 @@ pub struct Summary {
 /// `summary.json` → `contacts`.
 #[derive(Clone, Debug, Serialize)]
 pub struct ContactSummary {
+    #[serde(serialize_with = "honest_f64")]
     pub mean: f64,
     pub max: usize,
 }
@@ -69,9 +100,12 @@ pub struct ContactSummary {
 /// `summary.json` → `solver`.
 #[derive(Clone, Debug, Serialize)]
 pub struct SolverSummary {
+    #[serde(serialize_with = "honest_f64")]
     pub mean_iterations: f64,
+    #[serde(serialize_with = "honest_f64")]
     pub max_residual: f64,
     pub steps_not_converged: u64,
+    #[serde(serialize_with = "honest_f64")]
     pub tolerance: f64,
     pub norm: crate::solver::ConvergenceNorm,
 }

@@ -114,6 +114,14 @@ pub struct Simulation {
     /// Steps between ParaView frames; 0 = none.
     #[serde(default = "default_vtk_interval")]
     pub vtk_interval: u64,
+    /// Health check: speed (m/s) of a body's fastest point beyond which the run is stopped as
+    /// diverged; `None` = the default bound (see [`crate::health`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_speed: Option<f64>,
+    /// Health check: overlap (m) beyond which the run is stopped as diverged; `None` = the
+    /// default bound, a fraction of the smaller inradius of the two bodies in contact.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_overlap: Option<f64>,
 }
 
 fn default_checkpoint_interval() -> u64 {
@@ -244,6 +252,82 @@ pub struct Scenario {
     pub grains: Vec<GrainsSpec>,
 }
 
+/// Memory of a grain besides its shape's vertices (bytes): body state, about 8 contact points
+/// and their local problems, detection entries.
+pub const BYTES_PER_GRAIN: u128 = 5_000;
+/// Memory per vertex of a grain's shape (bytes): vertices, faces, edges and their adjacency.
+pub const BYTES_PER_VERTEX: u128 = 200;
+
+/// The memory this process may still use (bytes): Linux's `MemAvailable`; `None` elsewhere.
+pub fn available_memory() -> Option<u128> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kb: u128 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// A byte count for a message (`8.0 TB`).
+fn bytes(n: u128) -> String {
+    let units = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut x = n as f64;
+    let mut u = 0;
+    while x >= 1000.0 && u + 1 < units.len() {
+        x /= 1000.0;
+        u += 1;
+    }
+    format!("{x:.1} {}", units[u])
+}
+
+/// The advice for `[key]` written where `[[key]]` is meant.
+fn single_table(key: &str) -> String {
+    format!(
+        "\n[{key}] is a single table: use [[{key}]] (an array of tables, one [[{key}]] header \
+         per entry)"
+    )
+}
+
+/// Mistakes of shape that the typed reader reports obscurely ("invalid type: map, expected a
+/// sequence") or not at all (a third group in a friction pair is dropped).
+fn check_shape(v: &toml::Table) -> Result<(), ScenarioError> {
+    for key in ["body", "grains"] {
+        if v.get(key).is_some_and(toml::Value::is_table) {
+            return err(single_table(key).trim_start().to_string());
+        }
+    }
+    let pairs = v
+        .get("friction")
+        .and_then(|f| f.get("pairs"))
+        .and_then(toml::Value::as_array);
+    for (k, p) in pairs.into_iter().flatten().enumerate() {
+        if let Some(g) = p.get("groups").and_then(toml::Value::as_array) {
+            if g.len() != 2 {
+                return err(format!(
+                    "friction.pairs[{k}].groups has {} entries: a friction pair names exactly \
+                     two groups, e.g. groups = [\"grain\", \"wall\"]",
+                    g.len()
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The health check of `world` with the bounds a scenario may set (`None`: the default).
+pub fn health_check(
+    world: &World,
+    max_speed: Option<f64>,
+    max_overlap: Option<f64>,
+) -> crate::health::HealthCheck {
+    let mut h = crate::health::HealthCheck::new(world);
+    if let Some(v) = max_speed {
+        h = h.with_max_speed(v);
+    }
+    if let Some(d) = max_overlap {
+        h = h.with_max_overlap(d);
+    }
+    h
+}
+
 fn vec3(a: [f64; 3]) -> DVec3 {
     DVec3::from_array(a)
 }
@@ -260,9 +344,82 @@ impl Scenario {
     /// Parses TOML text (syntax and unknown-field errors come from the TOML reader, with the
     /// line), then validates.
     pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
+        match text.parse::<toml::Table>() {
+            Ok(v) => check_shape(&v)?,
+            // `[body]` beside `[[body]]` is a syntax error (a key defined twice): say why.
+            Err(e) => {
+                if let Some(k) = ["body", "grains"]
+                    .into_iter()
+                    .find(|k| text.lines().any(|l| l.trim() == format!("[{k}]")))
+                {
+                    return err(format!("{e}{}", single_table(k)));
+                }
+            }
+        }
         let s: Scenario = toml::from_str(text).map_err(|e| ScenarioError(e.to_string()))?;
         s.validate()?;
         Ok(s)
+    }
+
+    /// The health check of this scenario's run on `world` (built from it, not yet stepped):
+    /// the default bounds, or those of `[simulation] max_speed` / `max_overlap`.
+    pub fn health_check(&self, world: &World) -> crate::health::HealthCheck {
+        health_check(
+            world,
+            self.simulation.max_speed,
+            self.simulation.max_overlap,
+        )
+    }
+
+    /// The scenario as TOML text that [`Scenario::from_toml`] reads back equal (comments of the
+    /// original file are not kept).
+    pub fn to_toml(&self) -> Result<String, ScenarioError> {
+        toml::to_string(self).map_err(|e| ScenarioError(format!("cannot write the scenario: {e}")))
+    }
+
+    /// Bytes the run of this scenario is expected to need: per grain [`BYTES_PER_GRAIN`] plus
+    /// [`BYTES_PER_VERTEX`] per vertex of its largest shape (shape, state, contacts and their
+    /// local problems, at about 8 contact points a grain).
+    pub fn memory_estimate(&self) -> u128 {
+        let per = |vertices: usize| BYTES_PER_GRAIN + BYTES_PER_VERTEX * vertices as u128;
+        let grains: u128 = self
+            .grains
+            .iter()
+            .map(|g| g.pack.count as u128 * per(g.pack.vertices[1]))
+            .sum();
+        let bodies: u128 = self
+            .bodies
+            .iter()
+            .map(|b| per(b.vertices.as_ref().map_or(8, Vec::len)))
+            .sum();
+        grains + bodies
+    }
+
+    /// Refuses a scenario whose [`Scenario::memory_estimate`] exceeds `available` bytes (when
+    /// known) before anything is allocated, naming the largest grain pack.
+    pub fn check_memory(&self, available: Option<u128>) -> Result<(), ScenarioError> {
+        let (Some(avail), need) = (available, self.memory_estimate()) else {
+            return Ok(());
+        };
+        if need <= avail {
+            return Ok(());
+        }
+        let field = match self
+            .grains
+            .iter()
+            .enumerate()
+            .max_by_key(|(_, g)| g.pack.count)
+        {
+            Some((k, g)) => format!("grains[{k}].count = {}", g.pack.count),
+            None => format!("{} [[body]] entries", self.bodies.len()),
+        };
+        err(format!(
+            "{field}: the scenario needs about {} of memory (about {} kB a grain: shape, state \
+             and contacts) but this machine has {} available; use fewer grains",
+            bytes(need),
+            (BYTES_PER_GRAIN + BYTES_PER_VERTEX * 20) / 1000,
+            bytes(avail)
+        ))
     }
 
     /// Number of steps to run.
@@ -310,6 +467,14 @@ impl Scenario {
         if s.output_interval == 0 {
             return err("simulation.output_interval = 0 must be ≥ 1 step");
         }
+        for (field, v) in [("max_speed", s.max_speed), ("max_overlap", s.max_overlap)] {
+            if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
+                return err(format!(
+                    "simulation.{field} = {v} must be a finite number > 0 ({})",
+                    if field == "max_speed" { "m/s" } else { "m" }
+                ));
+            }
+        }
         self.solver.validate().map_err(ScenarioError)?;
         self.correction.validate().map_err(ScenarioError)?;
         if let Some(d) = &self.ddm {
@@ -329,9 +494,48 @@ impl Scenario {
                 self.friction.default
             ));
         }
+        // The groups the bodies have, in order of first appearance.
+        let mut groups: Vec<&str> = Vec::new();
+        for g in self.bodies.iter().map(|b| b.group.as_str()) {
+            if !groups.contains(&g) {
+                groups.push(g);
+            }
+        }
+        for g in self.grains.iter().map(|g| g.group.as_str()) {
+            if !groups.contains(&g) {
+                groups.push(g);
+            }
+        }
         for (k, p) in self.friction.pairs.iter().enumerate() {
             if !mu_ok(p.mu) {
                 return err(format!("friction.pairs[{k}].mu = {} must be ≥ 0", p.mu));
+            }
+            for g in &p.groups {
+                if !groups.contains(&g.as_str()) {
+                    return err(format!(
+                        "friction.pairs[{k}].groups names \"{g}\", which no [[body]] or \
+                         [[grains]] has (groups: {})",
+                        groups
+                            .iter()
+                            .map(|g| format!("\"{g}\""))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ));
+                }
+            }
+            let same = |q: &FrictionPair| {
+                let (a, b) = (&p.groups, &q.groups);
+                (a[0] == b[0] && a[1] == b[1]) || (a[0] == b[1] && a[1] == b[0])
+            };
+            if let Some(j) = self.friction.pairs[..k].iter().position(same) {
+                let q = &self.friction.pairs[j];
+                if q.mu != p.mu {
+                    return err(format!(
+                        "friction.pairs[{k}] gives groups \"{}\" and \"{}\" mu = {}, but \
+                         friction.pairs[{j}] gives them mu = {}: one coefficient per pair",
+                        p.groups[0], p.groups[1], p.mu, q.mu
+                    ));
+                }
             }
         }
         for (k, b) in self.bodies.iter().enumerate() {
@@ -513,6 +717,7 @@ impl Scenario {
     /// packs, then friction pairs).
     pub fn build(&self) -> Result<World, ScenarioError> {
         self.validate()?;
+        self.check_memory(available_memory())?;
         let mut groups: Vec<String> = Vec::new();
         let mut group_id = |name: &str| -> u32 {
             match groups.iter().position(|g| g == name) {
@@ -587,6 +792,8 @@ impl Scenario {
             ddm: self.ddm.clone(),
             ..StepSettings::default()
         };
-        Ok(World::new(bodies, friction, settings))
+        let mut world = World::new(bodies, friction, settings);
+        world.group_names = groups;
+        Ok(world)
     }
 }

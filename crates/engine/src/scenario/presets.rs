@@ -42,6 +42,8 @@ pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenari
             output_interval: 50,
             checkpoint_interval: 1000,
             vtk_interval: 500,
+            max_speed: None,
+            max_overlap: None,
         },
         solver: SolverSettings {
             tolerance: 1e-4,
