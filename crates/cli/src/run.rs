@@ -2,7 +2,7 @@
 //! scenarios and track scenarios (a `[track]` table: bed preparation, tamping, indicators).
 
 use crate::progress::Progress;
-use ballast_engine::health::{Divergence, HealthCheck};
+use ballast_engine::health::{initial_warnings, Divergence, HealthCheck};
 use ballast_engine::output::checkpoint::{
     checkpoint_path, list_checkpoints, newest_valid_checkpoint, prune_checkpoints,
     write_checkpoint_with_stats,
@@ -441,7 +441,13 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
     // A run that starts out of bounds (a body thrown at 1e12 m/s) is stopped before its
     // first step, naming that body rather than the grains it would hit.
     if start == 0 {
-        if let Err(d) = health.check(&world) {
+        // The first step's detection, done now (the step then solves it: same result) so
+        // that the initial contacts are checked too: bodies placed inside each other.
+        world.detect();
+        for w in initial_warnings(&world, OVERLAP_REPORT, OVERLAP_LINES as usize / 4) {
+            eprintln!("warning: {w}");
+        }
+        if let Err(d) = health.initial().check(&world) {
             let value = summary_json(&world, &stats, a.threads, &track, None, Some(&d))?;
             write_summary_and_report(out, &source, &text, &value)?;
             return Err(diverged(&d, out));
@@ -548,10 +554,12 @@ fn diverged(d: &Divergence, out: &Path) -> Failure {
         ),
         None => "no checkpoint was written".into(),
     };
-    Failure::Diverged(format!(
-        "{d}; the run is stopped and {kept} (a smaller simulation.dt or tighter solver \
-         settings usually help)"
-    ))
+    let advice = if d.step == 0 {
+        "check the scenario's initial positions and velocities"
+    } else {
+        "a smaller simulation.dt or tighter solver settings usually help"
+    };
+    Failure::Diverged(format!("{d}; the run is stopped and {kept} ({advice})"))
 }
 
 /// `summary.json`: the engine's [`Summary`], `status` (`"completed"`, or `"diverged"` with the

@@ -688,3 +688,80 @@ fn resume_flags_are_checked() {
     assert!(err.contains("--threads = 100000: must be at most"), "{err}");
     assert!(start.elapsed().as_secs() < 10);
 }
+
+/// Bodies placed inside each other, or under the floor, are refused before the first step
+/// (exit 3, both named; the initial bound is the smaller inradius); a small initial overlap is
+/// a warning naming the bodies, and the run goes on.
+#[test]
+fn initial_overlaps_are_named() {
+    let dir = tmp("initial");
+    let cube = |z: &str| {
+        format!(
+            "[[body]]\nshape = \"box\"\ngroup = \"block\"\nmaterial = \"stone\"\n\
+             half_extents = [0.02, 0.02, 0.02]\ncenter = [0.1, 0.1, {z}]\n\n"
+        )
+    };
+    let same = pile_variant(
+        &dir,
+        "same.toml",
+        &[(
+            "[[grains]]",
+            &format!("{}{}[[grains]]", cube("5"), cube("5.001")),
+        )],
+    );
+    let (code, err) = run_args(&[
+        same.as_os_str(),
+        "--out".as_ref(),
+        dir.join("s").as_os_str(),
+    ]);
+    assert_eq!(code, Some(3), "{err}");
+    assert!(
+        err.contains(
+            "the initial state (step 0) is out of bounds: body 5 (group \"block\") and body 6 \
+             (group \"block\") overlap by 39 mm, more than the bound 20 mm (1 × the smaller \
+             inradius"
+        ) && err.contains("initial positions"),
+        "{err}"
+    );
+    let mild = pile_variant(
+        &dir,
+        "mild.toml",
+        &[(
+            "[[grains]]",
+            &format!("{}{}[[grains]]", cube("5"), cube("5.035")),
+        )],
+    );
+    let (code, err) = run_args(&[
+        mild.as_os_str(),
+        "--steps".as_ref(),
+        "3".as_ref(),
+        "--out".as_ref(),
+        dir.join("m").as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains(
+            "warning: bodies 5 (group \"block\") and 6 (group \"block\") overlap by 5 mm at \
+             the start"
+        ),
+        "{err}"
+    );
+    // Under the floor: inside the floor's half-space, named twice.
+    let under = pile_variant(
+        &dir,
+        "under.toml",
+        &[("[[grains]]", &format!("{}[[grains]]", cube("-10")))],
+    );
+    let (code, err) = run_args(&[
+        under.as_os_str(),
+        "--out".as_ref(),
+        dir.join("u").as_os_str(),
+    ]);
+    assert_eq!(code, Some(3), "{err}");
+    for part in [
+        "warning: body 5 (group \"block\") lies wholly beneath the plane of body 0 (group \"wall\"), its centre 10 m under it",
+        "out of bounds: body 0 (group \"wall\") and body 5 (group \"block\") overlap by 10020 mm",
+    ] {
+        assert!(err.contains(part), "{part}: {err}");
+    }
+}

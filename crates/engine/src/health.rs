@@ -19,11 +19,16 @@
 //!    [`OVERLAP_FRACTION`] = 2 times the smaller inradius of its two bodies (the radius of the
 //!    largest sphere about a body's centre of mass that fits inside it; a plane has none): one
 //!    body has then been pushed into the other by more than its own inner diameter, which no
-//!    rigid-body contact solution allows. Flat grains squeezed by tamping tines legitimately
-//!    come close to their inradius: in the default tamping job overlaps reach 0.74 of
-//!    the smaller inradius (4.4 mm against 5.9 mm at step 385), so a bound at the inradius itself would sit too
-//!    close to a legitimate run. A fixed bound in metres can be given instead
-//!    (`[simulation] max_overlap`).
+//!    rigid-body contact solution allows. Flat grains pressed by tamping tines legitimately
+//!    go beyond their inradius: in the default tamping job an overlap reaches 1.12 inradii
+//!    at step 387 (6.57 mm against 5.89 mm), so a bound at the inradius itself stops that
+//!    run. A fixed bound in metres can be given instead (`[simulation] max_overlap`).
+//!
+//! The state a run starts from is checked with a bound of [`INITIAL_OVERLAP_FRACTION`] = 1
+//! inradius instead ([`HealthCheck::initial`]): two bodies placed in the same spot overlap by
+//! their width, at least twice the inradius, which the running bound would let pass; a
+//! prepared bed starts with overlaps under 1 mm. [`initial_warnings`] names smaller initial
+//! overlaps and bodies lying under a fixed plane.
 //!
 //! The check reads the world and changes nothing, so a checked run is bit-identical to an
 //! unchecked one. It costs one pass over the bodies and one over the contacts.
@@ -41,6 +46,11 @@ pub const SPEED_FLOOR: f64 = 1.0;
 /// An overlap deeper than this multiple of the smaller inradius of the two bodies in contact
 /// is a divergence (see the module documentation for why 2).
 pub const OVERLAP_FRACTION: f64 = 2.0;
+
+/// The overlap bound of a run's initial state, in inradii ([`HealthCheck::initial`]): a
+/// scene should start (nearly) without overlaps, and two bodies placed in the same spot
+/// overlap by at least twice the smaller inradius, which the running bound would let pass.
+pub const INITIAL_OVERLAP_FRACTION: f64 = 1.0;
 
 /// How deep an overlap may be.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -305,6 +315,17 @@ impl HealthCheck {
         }
     }
 
+    /// The check of the state a run starts from (after [`World::detect`]): the same, but for
+    /// a default overlap bound of [`INITIAL_OVERLAP_FRACTION`] inradii. A fixed
+    /// `max_overlap` stays as it is.
+    pub fn initial(&self) -> Self {
+        let mut h = self.clone();
+        if let OverlapBound::Fraction(_) = h.overlap {
+            h.overlap = OverlapBound::Fraction(INITIAL_OVERLAP_FRACTION);
+        }
+        h
+    }
+
     /// Replaces the speed bound (m/s; a scenario's `max_speed`).
     pub fn with_max_speed(mut self, v: f64) -> Self {
         self.max_speed = v;
@@ -471,6 +492,74 @@ impl HealthCheck {
         }
         Ok(())
     }
+}
+
+/// Warnings about a world about to take its first step, after [`World::detect`]: pairs of
+/// bodies overlapping by more than `depth` (m), and bodies lying wholly beneath a fixed
+/// plane (under a floor, say). At most `lines` of each are named, then their number. A
+/// scenario can mean neither, but both are usually a mistake in its coordinates.
+pub fn initial_warnings(world: &World, depth: f64, lines: usize) -> Vec<String> {
+    let b = &world.bodies;
+    let name = |i: u32| format!("{i} (group \"{}\")", world.group_name(b.group[i as usize]));
+    let mut out = Vec::new();
+    let c = &world.contacts;
+    let mut deep: Vec<(f64, u32, u32)> = (0..c.len())
+        .filter(|&k| -c.gap[k] > depth)
+        .map(|k| (-c.gap[k], c.body1[k], c.body2[k]))
+        .collect();
+    deep.sort_by(|a, b| b.0.total_cmp(&a.0));
+    deep.dedup_by_key(|d| (d.1, d.2));
+    for &(d, b1, b2) in deep.iter().take(lines) {
+        out.push(format!(
+            "bodies {} and {} overlap by {} mm at the start",
+            name(b1),
+            name(b2),
+            num(d * 1e3)
+        ));
+    }
+    if deep.len() > lines {
+        out.push(format!(
+            "{} pairs of bodies overlap by more than {} mm at the start (the deepest named above)",
+            deep.len(),
+            num(depth * 1e3)
+        ));
+    }
+    let planes: Vec<(usize, DVec3)> = (0..b.len())
+        .filter_map(|p| match b.shape[p] {
+            Shape::Plane { normal } if b.kind[p] == BodyKind::Fixed => {
+                Some((p, b.orientation[p] * normal))
+            }
+            _ => None,
+        })
+        .collect();
+    let mut under = Vec::new();
+    for i in 0..b.len() {
+        let Shape::Polyhedron(poly) = &b.shape[i] else {
+            continue;
+        };
+        for &(p, n) in &planes {
+            let d = n.dot(b.position[i] - b.position[p]);
+            if d < -poly.radius {
+                under.push((i, p, -d));
+                break;
+            }
+        }
+    }
+    for &(i, p, d) in under.iter().take(lines) {
+        out.push(format!(
+            "body {} lies wholly beneath the plane of body {}, its centre {} m under it",
+            name(i as u32),
+            name(p as u32),
+            num(d)
+        ));
+    }
+    if under.len() > lines {
+        out.push(format!(
+            "{} bodies lie wholly beneath a fixed plane (the first named above)",
+            under.len()
+        ));
+    }
+    out
 }
 
 #[cfg(test)]

@@ -200,3 +200,51 @@ fn a_settling_pile_is_healthy() {
     assert!(speed > 0.01 && speed < 0.5, "speed margin {speed}");
     assert!(overlap > 0.0 && overlap < 0.5, "overlap margin {overlap}");
 }
+
+/// Two bodies in the same spot overlap by their width, twice the inradius: the running bound
+/// lets that pass, the initial state's bound (one inradius) refuses it, and the warnings name
+/// the pair and a body placed under the floor.
+#[test]
+fn the_initial_state_is_checked_more_strictly() {
+    let (s, mut w) = two_boxes("", "center = [0.5, 0, 0.3]");
+    let check = s.health_check(&w);
+    w.bodies.position[2] = w.bodies.position[1];
+    w.bodies.position[1].z = -5.0;
+    w.bodies.position[2].z = 0.5;
+    let twin = w.bodies.shape[1].clone();
+    w.bodies.shape[2] = twin;
+    // Box 1 (50 mm half extents) under the floor, and a twin of it where box 2 was.
+    w.detect();
+    let warnings = ballast_engine::health::initial_warnings(&w, 1e-3, 5);
+    assert!(
+        warnings.iter().any(|m| m
+            == "body 1 (group \"block\") lies wholly beneath the plane of body 0 (group \"floor\"), its centre 5 m under it"),
+        "{warnings:?}"
+    );
+    assert!(check.check(&w).is_err(), "5 m under the floor");
+    // Now the twins in the same spot above the floor.
+    let (s, mut w) = two_boxes("", "center = [0.5, 0, 0.3]");
+    w.bodies.shape[2] = w.bodies.shape[1].clone();
+    w.bodies.position[1].z = 0.5;
+    w.bodies.position[2] = w.bodies.position[1];
+    w.detect();
+    let check = s.health_check(&w);
+    assert_eq!(
+        check.check(&w),
+        Ok(()),
+        "100 mm overlap, the running bound is 2 × 50 mm"
+    );
+    let d = check.initial().check(&w).unwrap_err();
+    assert_eq!((d.step, d.quantity), (0, Quantity::Overlap));
+    assert!((d.value - 0.1).abs() < 1e-9 && d.bound == 0.05, "{d}");
+    assert!(
+        d.to_string()
+            .starts_with("the initial state (step 0) is out of bounds"),
+        "{d}"
+    );
+    let warnings = ballast_engine::health::initial_warnings(&w, 1e-3, 5);
+    assert_eq!(
+        warnings,
+        ["bodies 1 (group \"block\") and 2 (group \"projectile\") overlap by 100 mm at the start"]
+    );
+}

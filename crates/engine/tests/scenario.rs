@@ -69,17 +69,17 @@ fn mistakes_name_the_field() {
         (
             "half_extents = [0.05, 0.05, 0.05]",
             "half_extents = [0.05, 0.0, 0.05]",
-            &["body[1].half_extents"],
+            &["body[1].half_extents = [0.05, 0, 0.05] must be > 0"],
         ),
         (
             "normal = [0, 0, 1]",
             "normal = [0, 0, 0]",
-            &["body[0].normal"],
+            &["body[0].normal = [0, 0, 0] must be"],
         ),
         (
             "kind = \"fixed\"",
             "kind = \"dynamic\"",
-            &["body[0].kind", "fixed"],
+            &["body[0].kind = \"dynamic\": a plane must be \"fixed\""],
         ),
         ("steps = 10", "steps = 10\nwibble = 3", &["wibble"]),
         (
@@ -125,6 +125,10 @@ fn mistakes_name_the_field() {
     for (from, to, needles) in cases {
         assert!(BASE.contains(from), "bad test case {from}");
         let msg = error_of(&BASE.replacen(from, to, 1));
+        // Scenario words, not Rust's debug text.
+        for rust in ["DVec3", "Dynamic", "Kinematic", "Fixed", "Plane", "Box"] {
+            assert!(!msg.contains(rust), "`{rust}` in: {msg}");
+        }
         for n in *needles {
             assert!(
                 msg.contains(n),

@@ -328,6 +328,29 @@ pub fn health_check(
     h
 }
 
+/// A vector as a scenario file writes it, `[x, y, z]` (not Rust's `DVec3(x, y, z)`).
+fn v3(v: DVec3) -> String {
+    format!("[{}, {}, {}]", v.x, v.y, v.z)
+}
+
+/// A body kind as a scenario file writes it.
+fn kind_name(k: BodyKind) -> &'static str {
+    match k {
+        BodyKind::Dynamic => "dynamic",
+        BodyKind::Kinematic => "kinematic",
+        BodyKind::Fixed => "fixed",
+    }
+}
+
+/// A shape as a scenario file writes it.
+fn shape_name(k: ShapeKind) -> &'static str {
+    match k {
+        ShapeKind::Polyhedron => "polyhedron",
+        ShapeKind::Box => "box",
+        ShapeKind::Plane => "plane",
+    }
+}
+
 fn vec3(a: [f64; 3]) -> DVec3 {
     DVec3::from_array(a)
 }
@@ -578,8 +601,8 @@ impl Scenario {
         let forbid = |name: &str, present: bool| {
             if present {
                 err(format!(
-                    "{at}.{name} is not allowed for shape = {:?}",
-                    b.shape
+                    "{at}.{name} is not allowed for shape = \"{}\"",
+                    shape_name(b.shape)
                 ))
             } else {
                 Ok(())
@@ -589,8 +612,8 @@ impl Scenario {
             ShapeKind::Plane => {
                 if b.kind != BodyKind::Fixed {
                     return err(format!(
-                        "{at}.kind = {:?}: a plane must be \"fixed\"",
-                        b.kind
+                        "{at}.kind = \"{}\": a plane must be \"fixed\"",
+                        kind_name(b.kind)
                     ));
                 }
                 let Some(p) = b.point else {
@@ -602,7 +625,7 @@ impl Scenario {
                 finite3(&format!("{at}.point"), p)?;
                 let n = finite3(&format!("{at}.normal"), n)?;
                 if n.length() < 1e-12 {
-                    return err(format!("{at}.normal = {n:?} must be a non-zero vector"));
+                    return err(format!("{at}.normal = {} must be a non-zero vector", v3(n)));
                 }
                 forbid("vertices", b.vertices.is_some())?;
                 forbid("half_extents", b.half_extents.is_some())?;
@@ -615,7 +638,7 @@ impl Scenario {
                     };
                     let h = finite3(&format!("{at}.half_extents"), h)?;
                     if h.min_element() <= 0.0 {
-                        return err(format!("{at}.half_extents = {h:?} must be > 0"));
+                        return err(format!("{at}.half_extents = {} must be > 0", v3(h)));
                     }
                     let Some(c) = b.center else {
                         return err(format!("{at}.center is required"));
@@ -668,7 +691,8 @@ impl Scenario {
             }
             (Some(_), kind) => {
                 return err(format!(
-                    "{at}.driver is only allowed for kind = \"kinematic\" (got {kind:?})"
+                    "{at}.driver is only allowed for kind = \"kinematic\" (got \"{}\")",
+                    kind_name(kind)
                 ))
             }
             _ => {}
