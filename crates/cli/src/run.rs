@@ -325,12 +325,13 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
             .filter(|&i| world.bodies.kind[i] == ballast_engine::bodies::BodyKind::Dynamic)
             .count();
         d.check_grains(grains).map_err(|e| {
-            let flag = if a.subdomains.is_some() {
-                "--subdomains"
+            // `e` starts "subdomains = …": name the key, or the flag that set it.
+            let field = if a.subdomains.is_some() {
+                "--subdomains: "
             } else {
-                "ddm"
+                "ddm."
             };
-            format!("{source}: {flag}: {e}")
+            format!("{source}: {field}{e}")
         })?;
     }
     let io = |e: std::io::Error| format!("write error in {}: {e}", out.display());
@@ -364,17 +365,24 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
     };
     let mut stats = RunStats::default();
     let (mut series, mut vtk) = if a.resume {
-        let scan = newest_valid_checkpoint(&ckpt_dir, &mut world).map_err(|e| e.to_string())?;
-        for s in &scan.skipped {
-            eprintln!("warning: skipped {}: {}", s.path.display(), s.error);
-        }
-        let Some(r) = scan.resumed else {
-            return Err(format!(
+        let no_checkpoint = || {
+            format!(
                 "--resume {}: no valid checkpoint in {}",
                 out.display(),
                 ckpt_dir.display()
             )
-            .into());
+        };
+        // A folder without a checkpoints/ folder has none (not "cannot read checkpoint").
+        if !ckpt_dir.is_dir() {
+            return Err(no_checkpoint().into());
+        }
+        let scan = newest_valid_checkpoint(&ckpt_dir, &mut world)
+            .map_err(|e| format!("--resume {}: {e}", out.display()))?;
+        for s in &scan.skipped {
+            eprintln!("warning: skipped {}: {}", s.path.display(), s.error);
+        }
+        let Some(r) = scan.resumed else {
+            return Err(no_checkpoint().into());
         };
         if steps < r.step {
             return Err(format!(

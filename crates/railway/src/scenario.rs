@@ -32,7 +32,7 @@
 //! ```
 
 use crate::error::{check_range, refuse, FieldError};
-use crate::grading::GradingCurve;
+use crate::grading::{GradingCurve, GradingTable};
 use crate::grains::GrainSpec;
 use crate::indicators::Indicators;
 use crate::preparation::{
@@ -111,7 +111,9 @@ impl Default for IndicatorSpec {
 #[serde(untagged)]
 enum GradingInput {
     Named(String),
-    Table(GradingCurve),
+    /// Checked after reading ([`GradingCurve::from_table`]): inside an untagged enum, the
+    /// check's message (which entry, what is allowed) would be lost.
+    Table(GradingTable),
 }
 
 /// `[ballast]` as written in a file.
@@ -330,7 +332,8 @@ impl TrackScenario {
         if let Some(b) = f.ballast {
             if let Some(g) = b.grading {
                 grains.grading = match g {
-                    GradingInput::Table(c) => c,
+                    GradingInput::Table(t) => GradingCurve::from_table(t.sieves_mm, t.passing)
+                        .map_err(|e| format!("ballast.{e}"))?,
                     GradingInput::Named(n) => match n.as_str() {
                         "31.5/50" => GradingCurve::en13450_31_5_50(),
                         "31.5/50 coarse" => GradingCurve::en13450_31_5_50_coarse(),
@@ -455,7 +458,18 @@ impl TrackScenario {
             .to_string());
         }
         self.track.validate().map_err(|e| e.to_string())?;
-        self.ballast.grains.validate().map_err(|e| e.to_string())?;
+        // The grain parameters are the file's [ballast] keys: name them so.
+        self.ballast.grains.validate().map_err(|e| match e {
+            crate::grains::GrainError::Field {
+                field,
+                value,
+                allowed,
+            } => format!(
+                "ballast.{} = {value}: {allowed}",
+                field.trim_start_matches("grains.")
+            ),
+            e => e.to_string(),
+        })?;
         self.preparation.validate().map_err(|e| e.to_string())?;
         self.tamping
             .validate(&self.track)

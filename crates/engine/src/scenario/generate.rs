@@ -34,10 +34,10 @@ pub struct GrainPack {
     pub seed: u64,
 }
 
-fn default_vertices() -> [usize; 2] {
+pub(crate) fn default_vertices() -> [usize; 2] {
     [12, 20]
 }
-fn one() -> f64 {
+pub(crate) fn one() -> f64 {
     1.0
 }
 
@@ -64,15 +64,19 @@ impl GrainPack {
                 return Err(format!("{name} = {x} must be in [1, 10]"));
             }
         }
+        // Before the span: a NaN in min would otherwise be blamed on max_xy.
+        if self.min.iter().any(|x| !x.is_finite()) {
+            return Err(format!("min = {:?} must be finite", self.min));
+        }
+        if self.max_xy.iter().any(|x| !x.is_finite()) {
+            return Err(format!("max_xy = {:?} must be finite", self.max_xy));
+        }
         let span = |k: usize| self.max_xy[k] - self.min[k];
         if !(span(0) >= d1 && span(1) >= d1) {
             return Err(format!(
                 "max_xy = {:?} must exceed min by at least the largest diameter {d1} m",
                 self.max_xy
             ));
-        }
-        if self.min.iter().chain(&self.max_xy).any(|x| !x.is_finite()) {
-            return Err("min and max_xy must be finite".into());
         }
         Ok(())
     }

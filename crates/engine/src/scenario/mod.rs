@@ -218,13 +218,55 @@ fn default_group() -> String {
 
 /// One `[[grains]]` pack.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, from = "GrainsFile")]
 pub struct GrainsSpec {
     #[serde(flatten)]
     pub pack: GrainPack,
     pub material: String,
     #[serde(default = "grain_group")]
     pub group: String,
+}
+
+/// `[[grains]]` as read: the pack's keys spelled out rather than flattened, so that a value of
+/// the wrong type is reported at its key (`count = 1e12`: "expected usize" at `count`, not at
+/// the `[[grains]]` header, which is all serde's buffered flatten can say).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GrainsFile {
+    count: usize,
+    min: [f64; 3],
+    max_xy: [f64; 2],
+    diameter: [f64; 2],
+    #[serde(default = "generate::default_vertices")]
+    vertices: [usize; 2],
+    #[serde(default = "generate::one")]
+    elongation: f64,
+    #[serde(default = "generate::one")]
+    flatness: f64,
+    #[serde(default)]
+    seed: u64,
+    material: String,
+    #[serde(default = "grain_group")]
+    group: String,
+}
+
+impl From<GrainsFile> for GrainsSpec {
+    fn from(f: GrainsFile) -> Self {
+        GrainsSpec {
+            pack: GrainPack {
+                count: f.count,
+                min: f.min,
+                max_xy: f.max_xy,
+                diameter: f.diameter,
+                vertices: f.vertices,
+                elongation: f.elongation,
+                flatness: f.flatness,
+                seed: f.seed,
+            },
+            material: f.material,
+            group: f.group,
+        }
+    }
 }
 
 fn grain_group() -> String {
@@ -369,13 +411,21 @@ impl Scenario {
     pub fn from_toml(text: &str) -> Result<Self, ScenarioError> {
         match text.parse::<toml::Table>() {
             Ok(v) => check_shape(&v)?,
-            // `[body]` beside `[[body]]` is a syntax error (a key defined twice): say why.
+            // `[body]` beside `[[body]]` is a syntax error (a key defined twice): say why, on
+            // the parser's line rather than after its quoted source (8 lines in all).
             Err(e) => {
                 if let Some(k) = ["body", "grains"]
                     .into_iter()
                     .find(|k| text.lines().any(|l| l.trim() == format!("[{k}]")))
                 {
-                    return err(format!("{e}{}", single_table(k)));
+                    let at = e.span().map_or(String::new(), |r| {
+                        format!(" at line {}", text[..r.start].matches('\n').count() + 1)
+                    });
+                    return err(format!(
+                        "TOML parse error{at}: {}{}",
+                        e.message().trim().replace('\n', "; "),
+                        single_table(k)
+                    ));
                 }
             }
         }
