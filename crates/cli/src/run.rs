@@ -441,6 +441,17 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
     // A run that starts out of bounds (a body thrown at 1e12 m/s) is stopped before its
     // first step, naming that body rather than the grains it would hit.
     if start == 0 {
+        for (i, d) in world.bodies.driver.iter().enumerate() {
+            for w in d
+                .iter()
+                .flat_map(|d| d.sampling_warnings(world.settings.dt))
+            {
+                eprintln!(
+                    "warning: body {i} (group \"{}\") driver {w}",
+                    world.group_name(world.bodies.group[i])
+                );
+            }
+        }
         // The first step's detection, done now (the step then solves it: same result) so
         // that the initial contacts are checked too: bodies placed inside each other.
         world.detect();

@@ -780,3 +780,39 @@ fn huge_values_are_cut_in_messages() {
         "{err}"
     );
 }
+
+/// A driver's sine sampled too coarsely by the time step is a warning naming the body, the
+/// term and the time step needed.
+#[test]
+fn coarsely_sampled_drivers_are_warned() {
+    let dir = tmp("sine");
+    let text = std::fs::read_to_string(example("sliding_block.toml"))
+        .unwrap()
+        .replace("frequency = 5.0", "frequency = 1e5");
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("s.toml");
+    std::fs::write(&f, text).unwrap();
+    let (code, err) = run_args(&[
+        f.as_os_str(),
+        "--steps".as_ref(),
+        "2".as_ref(),
+        "--out".as_ref(),
+        dir.join("o").as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains("warning: body 2 (group \"paddle\") driver vx[1]: sine at 100000 Hz, 0.050 steps per period at dt = 0.0002 s")
+            && err.contains("use dt ≤ 2.5e-6 s"),
+        "{err}"
+    );
+    // At 5 Hz (1000 steps per period): no warning.
+    let (code, err) = run_args(&[
+        example("sliding_block.toml").as_os_str(),
+        "--steps".as_ref(),
+        "2".as_ref(),
+        "--out".as_ref(),
+        dir.join("p").as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(!err.contains("sine"), "{err}");
+}
