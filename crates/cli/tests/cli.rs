@@ -816,3 +816,48 @@ fn coarsely_sampled_drivers_are_warned() {
     assert_eq!(code, Some(0), "{err}");
     assert!(!err.contains("sine"), "{err}");
 }
+
+/// Ctrl-C (SIGINT) stops a run after a whole step with exit code 130, a checkpoint of that
+/// step and `"status": "interrupted"`; resuming it ends bit-identical to a run never stopped.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_checkpoints_and_resumes() {
+    let (d, e) = (tmp("sigint-d"), tmp("sigint-e"));
+    let f = example("pile.toml");
+    let mut child = ballast()
+        .arg("run")
+        .arg(&f)
+        .args(["--quiet", "--out"])
+        .arg(d.as_path())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while !std::fs::read_to_string(d.join("series.csv"))
+        .unwrap_or_default()
+        .contains("\n100,")
+        && start.elapsed().as_secs() < 60
+    {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let st = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let code = child.wait().unwrap().code();
+    assert_eq!(code, Some(130));
+    let s = summary(&d);
+    assert_eq!(s["status"], "interrupted");
+    let at = s["steps"].as_u64().unwrap();
+    assert!((100..7500).contains(&at), "{at}");
+    assert_eq!(checkpoint_steps(&d).last(), Some(&at));
+    let to = (at + 60).to_string();
+    for (args, dir) in [(["--resume"], &d), (["--out"], &e)] {
+        let mut cmd = ballast();
+        cmd.arg("run").arg(&f).args(["--quiet", "--steps", &to]);
+        let st = cmd.args(args).arg(dir.as_path()).status().unwrap();
+        assert!(st.success());
+    }
+    assert_eq!(summary(&d)["state_digest"], summary(&e)["state_digest"]);
+    assert_eq!(summary(&d)["status"], "completed");
+}
