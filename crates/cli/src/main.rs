@@ -2,6 +2,7 @@
 
 mod bench;
 mod charts;
+mod interrupt;
 mod progress;
 mod report;
 mod run;
@@ -219,6 +220,10 @@ fn cut_lines(message: &str) -> String {
 /// error).
 const EXIT_DIVERGED: u8 = 3;
 
+/// Exit code of a run stopped by Ctrl-C or SIGTERM after saving its state (128 + SIGINT, the
+/// shells' convention).
+const EXIT_INTERRUPTED: u8 = 130;
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result: Result<(), run::Failure> = match cli.command {
@@ -300,6 +305,10 @@ fn main() -> ExitCode {
         Err(run::Failure::Diverged(e)) => {
             eprintln!("error: {}", cut_lines(&e));
             ExitCode::from(EXIT_DIVERGED)
+        }
+        Err(run::Failure::Interrupted(e)) => {
+            eprintln!("{}", cut_lines(&e));
+            ExitCode::from(EXIT_INTERRUPTED)
         }
     }
 }

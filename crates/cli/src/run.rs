@@ -38,6 +38,8 @@ pub enum Failure {
     Error(String),
     /// The health check stopped a diverging run (exit code 3); its outputs are written.
     Diverged(String),
+    /// Ctrl-C or SIGTERM stopped the run after a step, its state checkpointed (exit code 130).
+    Interrupted(String),
 }
 
 impl From<String> for Failure {
@@ -449,6 +451,17 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
     // A run that starts out of bounds (a body thrown at 1e12 m/s) is stopped before its
     // first step, naming that body rather than the grains it would hit.
     if start == 0 {
+        for (i, d) in world.bodies.driver.iter().enumerate() {
+            for w in d
+                .iter()
+                .flat_map(|d| d.sampling_warnings(world.settings.dt))
+            {
+                eprintln!(
+                    "warning: body {i} (group \"{}\") driver {w}",
+                    world.group_name(world.bodies.group[i])
+                );
+            }
+        }
         // The first step's detection, done now (the step then solves it: same result) so
         // that the initial contacts are checked too: bodies placed inside each other.
         world.detect();
@@ -462,6 +475,8 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
         }
     }
     let mut progress = Progress::new(steps.saturating_sub(start), a.quiet);
+    crate::interrupt::install();
+    let mut interrupted = false;
     let mut deep_steps = 0u64;
     while world.step_index < steps {
         let r = world.step();
@@ -506,6 +521,12 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
             prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
         }
         progress.update(k - start, r.time, r.contacts, r.solve.iterations);
+        if crate::interrupt::requested() && world.step_index < steps {
+            // Stop after a whole, healthy step, checkpointed below; no off-interval row, so
+            // that a resumed run's series.csv is that of an uninterrupted one.
+            interrupted = true;
+            break;
+        }
     }
     progress.finish();
     if !a.quiet && deep_steps > OVERLAP_LINES {
@@ -528,7 +549,10 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
         Some((step, v)) if step == world.step_index => Some(v),
         _ => None,
     };
-    let value = summary_json(&world, &stats, a.threads, &track, finals, None)?;
+    let mut value = summary_json(&world, &stats, a.threads, &track, finals, None)?;
+    if interrupted {
+        value["status"] = "interrupted".into();
+    }
     write_summary_and_report(out, &source, &text, &value)?;
     if stats.not_converged > 0 {
         eprintln!(
@@ -546,6 +570,14 @@ pub fn run(a: &RunArgs) -> Result<(), Failure> {
             world.timers.total,
             out.display()
         );
+    }
+    if interrupted {
+        return Err(Failure::Interrupted(format!(
+            "interrupted at step {} of {steps}: its state is checkpointed; `ballast run \
+             --resume {}` continues it",
+            world.step_index,
+            out.display()
+        )));
     }
     Ok(())
 }

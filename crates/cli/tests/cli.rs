@@ -780,3 +780,84 @@ fn huge_values_are_cut_in_messages() {
         "{err}"
     );
 }
+
+/// A driver's sine sampled too coarsely by the time step is a warning naming the body, the
+/// term and the time step needed.
+#[test]
+fn coarsely_sampled_drivers_are_warned() {
+    let dir = tmp("sine");
+    let text = std::fs::read_to_string(example("sliding_block.toml"))
+        .unwrap()
+        .replace("frequency = 5.0", "frequency = 1e5");
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("s.toml");
+    std::fs::write(&f, text).unwrap();
+    let (code, err) = run_args(&[
+        f.as_os_str(),
+        "--steps".as_ref(),
+        "2".as_ref(),
+        "--out".as_ref(),
+        dir.join("o").as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains("warning: body 2 (group \"paddle\") driver vx[1]: sine at 100000 Hz, 0.050 steps per period at dt = 0.0002 s")
+            && err.contains("use dt ≤ 2.5e-6 s"),
+        "{err}"
+    );
+    // At 5 Hz (1000 steps per period): no warning.
+    let (code, err) = run_args(&[
+        example("sliding_block.toml").as_os_str(),
+        "--steps".as_ref(),
+        "2".as_ref(),
+        "--out".as_ref(),
+        dir.join("p").as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(!err.contains("sine"), "{err}");
+}
+
+/// Ctrl-C (SIGINT) stops a run after a whole step with exit code 130, a checkpoint of that
+/// step and `"status": "interrupted"`; resuming it ends bit-identical to a run never stopped.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_checkpoints_and_resumes() {
+    let (d, e) = (tmp("sigint-d"), tmp("sigint-e"));
+    let f = example("pile.toml");
+    let mut child = ballast()
+        .arg("run")
+        .arg(&f)
+        .args(["--quiet", "--out"])
+        .arg(d.as_path())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while !std::fs::read_to_string(d.join("series.csv"))
+        .unwrap_or_default()
+        .contains("\n100,")
+        && start.elapsed().as_secs() < 60
+    {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let st = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(st.success());
+    let code = child.wait().unwrap().code();
+    assert_eq!(code, Some(130));
+    let s = summary(&d);
+    assert_eq!(s["status"], "interrupted");
+    let at = s["steps"].as_u64().unwrap();
+    assert!((100..7500).contains(&at), "{at}");
+    assert_eq!(checkpoint_steps(&d).last(), Some(&at));
+    let to = (at + 60).to_string();
+    for (args, dir) in [(["--resume"], &d), (["--out"], &e)] {
+        let mut cmd = ballast();
+        cmd.arg("run").arg(&f).args(["--quiet", "--steps", &to]);
+        let st = cmd.args(args).arg(dir.as_path()).status().unwrap();
+        assert!(st.success());
+    }
+    assert_eq!(summary(&d)["state_digest"], summary(&e)["state_digest"]);
+    assert_eq!(summary(&d)["status"], "completed");
+}

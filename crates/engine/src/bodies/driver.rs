@@ -190,6 +190,10 @@ fn table_eval(times: &[f64], values: &[f64], t: f64) -> f64 {
 /// A sum of terms.
 pub type Profile = Vec<Term>;
 
+/// Fewest time steps per period of a sine term for the motion to be followed (twice Nyquist's
+/// 2: at 2 a sine can be sampled at its zeros every step).
+pub const MIN_SAMPLES_PER_PERIOD: f64 = 4.0;
+
 /// Imposed velocity of a kinematic body: one optional profile per degree of freedom.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -356,6 +360,32 @@ impl Driver {
     /// True when some degree of freedom is force-limited.
     pub fn is_force_limited(&self) -> bool {
         self.limits_translation() || self.limits_rotation()
+    }
+
+    /// The sine terms that a time step `dt` samples too coarsely to follow: fewer than
+    /// [`MIN_SAMPLES_PER_PERIOD`] steps per period (a 1e5 Hz sine at dt = 1e-3 s is sampled at
+    /// the same phase every step, so it is seen as a constant), each as
+    /// `"vx[0]: sine at 1e5 Hz, 0.01 steps per period"` (`superposed.` before superposed ones).
+    pub fn sampling_warnings(&self, dt: f64) -> Vec<String> {
+        let mut out = Vec::new();
+        for (prefix, dofs) in [("", self.dofs()), ("superposed.", self.superposed.dofs())] {
+            for (name, profile) in dofs {
+                for (k, t) in profile.iter().enumerate() {
+                    if let Term::Sine { frequency, .. } = t {
+                        let per_period = 1.0 / (frequency * dt);
+                        if *frequency > 0.0 && per_period < MIN_SAMPLES_PER_PERIOD {
+                            out.push(format!(
+                                "{prefix}{name}[{k}]: sine at {frequency} Hz, {per_period:.3} \
+                                 steps per period at dt = {dt} s (at least \
+                                 {MIN_SAMPLES_PER_PERIOD} are needed to follow it: use dt ≤ {:e} s)",
+                                1.0 / (MIN_SAMPLES_PER_PERIOD * frequency)
+                            ));
+                        }
+                    }
+                }
+            }
+        }
+        out
     }
 
     /// True when the body is free (dynamic) at time `t`.
