@@ -20,7 +20,7 @@
 //!
 //! Each line prints `sweeps:residual(Σ rₙ)`.
 
-use ballast_engine::laws::coulomb::{natural_map_residual, solve_local_from};
+use ballast_engine::laws::coulomb::solve_local_from;
 use ballast_engine::laws::ContactStatus;
 use ballast_engine::math::{DMat3, DVec3};
 use ballast_engine::solver::{drive, ContactProblem};
@@ -125,18 +125,11 @@ fn engine(world: &World) -> String {
 /// The contacts carrying most of the residual of `r` on `p`.
 fn hot_contacts(world: &World, p: &ContactProblem, r: &[DVec3], count: usize) {
     let u = p.velocity(r);
-    let mut terms: Vec<(f64, usize)> = (0..p.len())
-        .map(|a| {
-            let wnn = p.w.get(a, a).map_or(0.0, |b| b.x_axis.x);
-            if wnn <= 0.0 {
-                return (0.0, a);
-            }
-            let rho = 1.0 / wnn;
-            (
-                (natural_map_residual(r[a], u[a] * rho, p.mu[a]) / rho).powi(2),
-                a,
-            )
-        })
+    let mut terms: Vec<(f64, usize)> = p
+        .residual_terms(r)
+        .into_iter()
+        .enumerate()
+        .map(|(a, t)| (t, a))
         .collect();
     let total: f64 = terms.iter().map(|t| t.0).sum();
     terms.sort_by(|x, y| y.0.total_cmp(&x.0));
@@ -455,19 +448,11 @@ fn hot_cluster(
     seeds: usize,
     cap: usize,
 ) -> Vec<usize> {
-    let u = p.velocity(r);
-    let mut terms: Vec<(f64, usize)> = (0..p.len())
-        .map(|a| {
-            let wnn = p.w.get(a, a).map_or(0.0, |b| b.x_axis.x);
-            if wnn <= 0.0 {
-                return (0.0, a);
-            }
-            let rho = 1.0 / wnn;
-            (
-                (natural_map_residual(r[a], u[a] * rho, p.mu[a]) / rho).powi(2),
-                a,
-            )
-        })
+    let mut terms: Vec<(f64, usize)> = p
+        .residual_terms(r)
+        .into_iter()
+        .enumerate()
+        .map(|(a, t)| (t, a))
         .collect();
     terms.sort_by(|x, y| y.0.total_cmp(&x.0));
     let mut set: std::collections::BTreeSet<usize> =

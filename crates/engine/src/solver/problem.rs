@@ -207,8 +207,16 @@ impl ContactProblem {
     /// The engine's relative natural-map residual of `r` (per contact scaled by
     /// `ρ_α = 1/W_nn,α`, over [`ContactProblem::scale`]).
     pub fn residual(&self, r: &[DVec3]) -> f64 {
+        let sum: f64 = self.residual_terms(r).iter().sum();
+        let scale = if self.scale > 0.0 { self.scale } else { 1.0 };
+        sum.sqrt() / scale
+    }
+
+    /// Each contact's squared term of [`ContactProblem::residual`] (m²/s², not scaled):
+    /// where the residual is.
+    pub fn residual_terms(&self, r: &[DVec3]) -> Vec<f64> {
         let u = self.velocity(r);
-        let sum: f64 = (0..self.len())
+        (0..self.len())
             .map(|a| {
                 let wnn = self.w.get(a, a).map_or(0.0, |b| b.x_axis.x);
                 if wnn <= 0.0 {
@@ -217,9 +225,7 @@ impl ContactProblem {
                 let rho = 1.0 / wnn;
                 (natural_map_residual(r[a], u[a] * rho, self.mu[a]) / rho).powi(2)
             })
-            .sum();
-        let scale = if self.scale > 0.0 { self.scale } else { 1.0 };
-        sum.sqrt() / scale
+            .collect()
     }
 
     /// Non-Linear Gauss-Seidel on the assembled problem, contacts in order, from the impulses
