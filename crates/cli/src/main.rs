@@ -235,9 +235,9 @@ impl Observer for Terminal {
         interrupt::install();
     }
 
-    fn step(&mut self, done: u64, time: f64, contacts: usize, iterations: usize) {
+    fn step(&mut self, done: u64, r: &ballast_engine::world::StepReport) {
         if let Some(p) = &mut self.progress {
-            p.update(done, time, contacts, iterations);
+            p.update(done, r.time, r.contacts, r.solve.iterations);
         }
     }
 

@@ -80,9 +80,9 @@ pub trait Observer {
     /// checkpoint). Called once the scene is built and its folder ready.
     fn start(&mut self, _total: u64) {}
 
-    /// After each step: `done` steps of this session so far, the simulated time (s), and the
-    /// step's contacts and NLGS iterations.
-    fn step(&mut self, _done: u64, _time: f64, _contacts: usize, _iterations: usize) {}
+    /// After each step: `done` steps of this session so far, and the step's report (its
+    /// index, time, contacts, NLGS iterations, …).
+    fn step(&mut self, _done: u64, _report: &StepReport) {}
 
     /// The steps are over or stopped; called before the closing messages.
     fn finish(&mut self) {}
@@ -610,11 +610,11 @@ impl Job {
             (*output_interval, *vtk_interval, *checkpoint_interval);
         if !o.resume && world.step_index != 0 {
             return Err(Failure::Error(format!(
-                "{}: the simulation is at step {}, and a run folder starts at step 0; run a \
-                 new simulation of the scenario, or continue this folder's run with {}",
+                "{}: the simulation is already at step {} and a new run starts at step 0; run \
+                 a fresh simulation of the scenario, or continue a run folder with {}",
                 (names.out)(out),
                 world.step_index,
-                (names.resume_command)(out)
+                (names.resume)(out)
             )));
         }
         let steps = o.steps.unwrap_or(self.steps);
@@ -812,7 +812,7 @@ impl Job {
                     .map_err(io)?;
                 prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
             }
-            observer.step(k - start, r.time, r.contacts, r.solve.iterations);
+            observer.step(k - start, &r);
             if observer.stop_requested() && world.step_index < steps {
                 // Stop after a whole, healthy step, checkpointed below; no off-interval row,
                 // so that a resumed run's series.csv is that of an uninterrupted one.
