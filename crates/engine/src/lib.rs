@@ -22,6 +22,7 @@ pub mod bodies;
 pub mod contacts;
 pub mod detection;
 pub mod digest;
+pub mod error;
 pub mod health;
 pub mod laws;
 pub mod math;
@@ -32,3 +33,6 @@ mod slices;
 pub mod solver;
 pub mod timing;
 pub mod world;
+
+pub use error::{Error, Result};
+pub use scenario::ScenarioError;

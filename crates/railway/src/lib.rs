@@ -30,7 +30,7 @@ pub mod tamping;
 pub mod track;
 
 pub use compacity::{clipped_volume, compacity, solid_volume, CompacityError};
-pub use error::FieldError;
+pub use error::{Error, FieldError};
 pub use grading::{GradingCurve, GradingError, GradingTable, SizeClass};
 pub use grains::{generate_grains, Amount, GrainError, GrainSpec};
 pub use scenario::{is_track_scenario, TrackModel, TrackScenario};

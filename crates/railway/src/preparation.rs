@@ -41,7 +41,7 @@
 //! and takes the poses from the file: the prepared bed is bit-identical to a fresh preparation.
 
 use crate::compacity::clipped_volume;
-use crate::error::{check_range, FieldError};
+use crate::error::{check_range, Error, FieldError};
 use crate::grains::{generate_grains, Amount, GrainSpec};
 use crate::scene::{build_bodies, Blocks, PlacedGrain, TrackFriction};
 use crate::track::TrackSpec;
@@ -325,11 +325,11 @@ pub fn load_or_prepare(
     friction: &TrackFriction,
     cache_dir: Option<&Path>,
     progress: &mut dyn FnMut(PrepProgress),
-) -> Result<(PreparedSample, Option<String>), String> {
-    track.validate().map_err(|e| e.to_string())?;
-    ballast.grains.validate().map_err(|e| e.to_string())?;
-    prep.validate().map_err(|e| e.to_string())?;
-    friction.validate().map_err(|e| e.to_string())?;
+) -> Result<(PreparedSample, Option<String>), Error> {
+    track.validate()?;
+    ballast.grains.validate()?;
+    prep.validate()?;
+    friction.validate()?;
     let key = key_json(track, ballast, prep, friction);
     let path = cache_dir
         .filter(|_| prep.cache)
@@ -362,10 +362,9 @@ fn generate(
     track: &TrackSpec,
     ballast: &BallastSpec,
     prep: &PreparationSpec,
-) -> Result<Vec<PlacedGrain>, String> {
+) -> Result<Vec<PlacedGrain>, Error> {
     let volume = prep.compacity * prep.overfill * track.bed_box().volume();
-    let builds = generate_grains(&ballast.grains, Amount::SolidVolume(volume), ballast.seed)
-        .map_err(|e| e.to_string())?;
+    let builds = generate_grains(&ballast.grains, Amount::SolidVolume(volume), ballast.seed)?;
     Ok(builds
         .into_iter()
         .enumerate()
@@ -389,7 +388,7 @@ pub fn prepare(
     prep: &PreparationSpec,
     friction: &TrackFriction,
     progress: &mut dyn FnMut(PrepProgress),
-) -> Result<PreparedSample, String> {
+) -> Result<PreparedSample, Error> {
     load_or_prepare(
         track,
         ballast,
