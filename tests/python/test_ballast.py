@@ -7,6 +7,7 @@ import json
 import math
 import os
 import re
+import signal
 import subprocess
 import threading
 import time
@@ -112,23 +113,6 @@ def test_arrays_have_shapes_dtypes_and_the_summary_keys():
     assert set(np.unique(c["status"])) <= {0, 1, 2}
 
 
-def test_the_same_run_as_the_cli(tmp_path):
-    exe = os.path.join(ROOT, "target", "release", "ballast")
-    if not os.path.exists(exe):
-        subprocess.run(["cargo", "build", "--release", "-p", "ballast-cli"], cwd=ROOT, check=True)
-    scenario = os.path.join(ROOT, "examples", "sliding_block.toml")
-    out = tmp_path / "run"
-    subprocess.run(
-        [exe, "run", scenario, "--out", str(out), "--steps", "300", "--quiet", "--threads", "1"],
-        check=True,
-    )
-    cli = json.loads((out / "summary.json").read_text())
-    sim = ballast.Simulation.from_toml(scenario)
-    sim.step(300)
-    assert sim.state_digest() == cli["state_digest"]
-    assert sim.summary()["solver"]["mean_iterations"] == cli["solver"]["mean_iterations"]
-
-
 def cli_exe():
     exe = os.path.join(ROOT, "target", "release", "ballast")
     if not os.path.exists(exe):
@@ -146,6 +130,21 @@ def series_without_timings(path):
 def run_files(out):
     """The files of a run folder, relative to it."""
     return sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+
+
+def test_the_same_run_as_the_cli(tmp_path):
+    exe = cli_exe()
+    scenario = os.path.join(ROOT, "examples", "sliding_block.toml")
+    out = tmp_path / "run"
+    subprocess.run(
+        [exe, "run", scenario, "--out", str(out), "--steps", "300", "--quiet", "--threads", "1"],
+        check=True,
+    )
+    cli = json.loads((out / "summary.json").read_text())
+    sim = ballast.Simulation.from_toml(scenario)
+    sim.step(300)
+    assert sim.state_digest() == cli["state_digest"]
+    assert sim.summary()["solver"]["mean_iterations"] == cli["solver"]["mean_iterations"]
 
 
 def test_run_writes_the_cli_run_folder(tmp_path):
@@ -200,6 +199,19 @@ def test_run_resumes_and_stops_bit_identically(tmp_path):
     )
 
 
+def test_ctrl_c_stops_a_run_after_the_step(tmp_path):
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+
+    def ctrl_c(k, t):
+        if k == 30:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    with pytest.raises(KeyboardInterrupt, match="interrupted at step 30 of 100"):
+        sim.run(tmp_path / "run", steps=100, progress=ctrl_c, every=10, quiet=True)
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert s["status"] == "interrupted" and s["steps"] == 30 and sim.step_index == 30
+
+
 def test_run_refuses_bad_arguments_naming_them(tmp_path):
     scenario = os.path.join(ROOT, "examples", "sliding_block.toml")
     sim = ballast.Simulation.from_toml(scenario)
@@ -239,8 +251,9 @@ def test_run_stopped_by_the_health_check_raises(tmp_path):
     assert s["status"] == "diverged" and s["divergence"]["step"] == 1
 
 
-def test_run_releases_the_gil(tmp_path):
-    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+def assert_releases_the_gil(call):
+    """A second Python thread ticks about once a millisecond while `call()` runs: none would
+    with the GIL held."""
     ticks = []
     stop = threading.Event()
 
@@ -253,37 +266,23 @@ def test_run_releases_the_gil(tmp_path):
     t.start()
     time.sleep(0.01)
     start = time.perf_counter()
-    sim.run(tmp_path / "run", steps=1500, every=10000, quiet=True)
+    call()
     end = time.perf_counter()
     stop.set()
     t.join()
     during = [x for x in ticks if start < x < end]
     assert end - start > 0.05
     assert len(during) > 10, f"{len(during)} ticks in {end - start:.3f} s"
+
+
+def test_run_releases_the_gil(tmp_path):
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+    assert_releases_the_gil(lambda: sim.run(tmp_path / "run", steps=1500, every=10000, quiet=True))
 
 
 def test_step_releases_the_gil():
     sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
-    ticks = []
-    stop = threading.Event()
-
-    def other():
-        while not stop.is_set():
-            ticks.append(time.perf_counter())
-            time.sleep(0.001)
-
-    t = threading.Thread(target=other)
-    t.start()
-    time.sleep(0.01)
-    start = time.perf_counter()
-    sim.step(3000, every=10000)
-    end = time.perf_counter()
-    stop.set()
-    t.join()
-    during = [x for x in ticks if start < x < end]
-    # Held GIL: no tick during the call. Released: about one per millisecond.
-    assert end - start > 0.05
-    assert len(during) > 10, f"{len(during)} ticks in {end - start:.3f} s"
+    assert_releases_the_gil(lambda: sim.step(3000, every=10000))
 
 
 def test_progress_is_called():
