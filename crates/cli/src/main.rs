@@ -102,7 +102,7 @@ enum Command {
         /// Scaling study: DDM phases with fewer contacts run on the calling thread (the
         /// scenario key `ddm.min_parallel_contacts`: the value for 2 threads, scaled by
         /// 2/threads; scheduling only, results are unchanged).
-        #[arg(long, default_value_t = ballast_engine::solver::ddm::MIN_PARALLEL_CONTACTS)]
+        #[arg(long, default_value_t = ballast_engine::MIN_PARALLEL_CONTACTS)]
         min_parallel_contacts: usize,
         /// Scaling study: detection reuse distance in m (the scenario key
         /// `simulation.reuse_distance`; 0 = every pair detected anew each step).

@@ -41,12 +41,13 @@
 //! and takes the poses from the file: the prepared bed is bit-identical to a fresh preparation.
 
 use crate::compacity::clipped_volume;
+use crate::defaults::{default_ddm, DEFAULT_ALERT};
 use crate::error::{check_range, Error, FieldError};
 use crate::grains::{generate_grains, Amount, GrainSpec};
 use crate::scene::{build_bodies, Blocks, PlacedGrain, TrackFriction};
 use crate::track::TrackSpec;
+use ballast_engine::fnv1a64;
 use ballast_engine::math::{DQuat, DVec3};
-use ballast_engine::output::checkpoint::fnv1a64;
 use ballast_engine::output::write_atomic;
 use ballast_engine::shapes::Shape;
 use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, SolverSettings};
@@ -118,7 +119,7 @@ impl Default for PreparationSpec {
             dt: 5e-4,
             tolerance: 1e-2,
             max_iterations: 40,
-            alert: crate::scenario::DEFAULT_ALERT,
+            alert: DEFAULT_ALERT,
             settle_time: 0.25,
             block_settle_time: 0.2,
             rest_speed: 0.05,
@@ -431,7 +432,7 @@ fn prepare_from(
             ..SolverSettings::default()
         },
         // Parallel NLGS on the same split as the default job (deterministic, any thread count).
-        ddm: Some(crate::scenario::default_ddm()),
+        ddm: Some(default_ddm()),
         ..StepSettings::default()
     };
     let density = ballast.grains.density;
