@@ -168,6 +168,10 @@ def test_run_writes_the_cli_run_folder(tmp_path):
     assert (py / "scenario.toml").read_text() == (cli / "scenario.toml").read_text()
     assert run_files(py) == run_files(cli)
     assert "report.md" in run_files(py) and "plots/solver.png" in run_files(py)
+    # The report names the scenario file, as the CLI's does.
+    title = "# ballast run report: `pile.toml`"
+    assert (py / "report.md").read_text().splitlines()[0] == title
+    assert (cli / "report.md").read_text().splitlines()[0] == title
 
 
 def test_run_resumes_and_stops_bit_identically(tmp_path):

@@ -149,16 +149,13 @@ impl Simulation {
     #[pyo3(signature = (text_or_path, cache = None))]
     fn from_toml(text_or_path: &str, cache: Option<PathBuf>) -> PyResult<Self> {
         let path = Path::new(text_or_path);
-        let text = if !text_or_path.contains('\n') && path.is_file() {
-            std::fs::read_to_string(path)
-                .map_err(|e| PyIOError::new_err(format!("cannot read {text_or_path}: {e}")))?
+        // Messages and the report name a file by its path, text as "scenario".
+        let (source, text) = if !text_or_path.contains('\n') && path.is_file() {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| PyIOError::new_err(format!("cannot read {text_or_path}: {e}")))?;
+            (text_or_path, text)
         } else {
-            text_or_path.to_string()
-        };
-        let source = if text.len() == text_or_path.len() && path.is_file() {
-            text_or_path
-        } else {
-            "scenario"
+            ("scenario", text_or_path.to_string())
         };
         build(source, &text, cache.as_deref())
     }
