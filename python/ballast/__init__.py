@@ -25,11 +25,19 @@ import os
 
 import numpy as np
 
+from ._ballast import DivergedError, __version__, preset_toml
 from ._ballast import Simulation as _Core
-from ._ballast import __version__, preset_toml
 from ._ballast import solve_fc3d_blocks as _solve_blocks
 
-__all__ = ["Simulation", "solve_fc3d", "write_fclib", "read_fclib", "preset_toml", "__version__"]
+__all__ = [
+    "Simulation",
+    "DivergedError",
+    "solve_fc3d",
+    "write_fclib",
+    "read_fclib",
+    "preset_toml",
+    "__version__",
+]
 
 
 def _toml_value(key, v):
@@ -64,6 +72,13 @@ def _overlay_toml(overrides):
         for k, v in values.items():
             lines.append(f"{k} = {_toml_value(f'{table}.{k}', v)}")
     return "\n".join(lines) + "\n"
+
+
+def _whole(name, v, minimum):
+    """``v`` as a whole number ≥ ``minimum``, else ``ValueError`` naming ``name``."""
+    if isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= minimum:
+        return int(v)
+    raise ValueError(f"{name} = {v!r}: expected a whole number ≥ {minimum}")
 
 
 def _cache(cache):
@@ -102,6 +117,40 @@ class Simulation:
         """Advances ``n`` steps, with the GIL released (other Python threads run meanwhile);
         ``progress(step_index, time)`` is called every ``every`` steps."""
         self._core.step(int(n), progress, int(every))
+
+    def run(self, out, steps=None, overwrite=False, resume=False, progress=None, every=100,
+            quiet=False):
+        """Runs the simulation into the run folder ``out``, the folder ``ballast run`` writes:
+        ``scenario.toml``, ``series.csv``, ``summary.json``, ``report.md``, ``plots/``, the
+        ParaView series (``*.pvd``, ``vtk/``), ``checkpoints/``, and ``sections/`` for track
+        runs; up to step ``steps`` (the scenario's count when ``None``), with the GIL
+        released. A new run starts at step 0 (on a simulation not stepped yet), in a folder
+        holding no other run unless ``overwrite`` (which deletes that run's files first);
+        ``resume=True`` continues the run in ``out`` from its newest checkpoint instead.
+
+        ``progress(step_index, time)`` is called every ``every`` steps and at the end; an
+        exception it raises, or Ctrl-C, stops the run after the step in progress, its state
+        checkpointed and ``summary.json`` saying ``"interrupted"``, and is raised (Ctrl-C as
+        ``KeyboardInterrupt``). Messages (warnings, the closing line; only warnings when
+        ``quiet``) go to ``sys.stderr``. Returns ``summary.json`` as a dict. Raises
+        ``ValueError`` naming the argument, ``DivergedError`` when the health check stops the
+        run (its folder is written)."""
+        try:
+            out = os.fspath(out)
+        except TypeError:
+            raise ValueError(f"out = {out!r}: expected a folder path (str or os.PathLike)") from None
+        if steps is not None:
+            steps = _whole("steps", steps, 0)
+        every = _whole("every", every, 1)
+        if progress is not None and not callable(progress):
+            raise ValueError(f"progress = {progress!r}: expected None or progress(step_index, time)")
+        for name, flag in [("overwrite", overwrite), ("resume", resume), ("quiet", quiet)]:
+            if not isinstance(flag, (bool, np.bool_)):
+                raise ValueError(f"{name} = {flag!r}: expected True or False")
+        summary = self._core.run(
+            out, steps, bool(overwrite), bool(resume), progress, every, bool(quiet)
+        )
+        return json.loads(summary)
 
     @property
     def time(self):

@@ -7,6 +7,7 @@ import json
 import math
 import os
 import re
+import signal
 import subprocess
 import threading
 import time
@@ -112,10 +113,27 @@ def test_arrays_have_shapes_dtypes_and_the_summary_keys():
     assert set(np.unique(c["status"])) <= {0, 1, 2}
 
 
-def test_the_same_run_as_the_cli(tmp_path):
+def cli_exe():
     exe = os.path.join(ROOT, "target", "release", "ballast")
     if not os.path.exists(exe):
         subprocess.run(["cargo", "build", "--release", "-p", "ballast-cli"], cwd=ROOT, check=True)
+    return exe
+
+
+def series_without_timings(path):
+    """`series.csv`'s header and rows without the wall-clock columns (`t_*`)."""
+    lines = path.read_text().splitlines()
+    keep = [i for i, name in enumerate(lines[0].split(",")) if not name.startswith("t_")]
+    return [[row.split(",")[i] for i in keep] for row in lines]
+
+
+def run_files(out):
+    """The files of a run folder, relative to it."""
+    return sorted(str(p.relative_to(out)) for p in out.rglob("*") if p.is_file())
+
+
+def test_the_same_run_as_the_cli(tmp_path):
+    exe = cli_exe()
     scenario = os.path.join(ROOT, "examples", "sliding_block.toml")
     out = tmp_path / "run"
     subprocess.run(
@@ -129,8 +147,117 @@ def test_the_same_run_as_the_cli(tmp_path):
     assert sim.summary()["solver"]["mean_iterations"] == cli["solver"]["mean_iterations"]
 
 
-def test_step_releases_the_gil():
+def test_run_writes_the_cli_run_folder(tmp_path):
+    scenario = os.path.join(ROOT, "examples", "pile.toml")
+    cli, py = tmp_path / "cli", tmp_path / "py"
+    subprocess.run(
+        [cli_exe(), "run", scenario, "--out", str(cli), "--steps", "120", "--quiet",
+         "--threads", "1"],
+        check=True,
+    )
+    sim = ballast.Simulation.from_toml(scenario)
+    summary = sim.run(py, steps=120, quiet=True)
+    expected = json.loads((cli / "summary.json").read_text())
+    assert summary == json.loads((py / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["steps"] == 120
+    assert summary["state_digest"] == expected["state_digest"] == sim.state_digest()
+    assert sim.step_index == 120 and sim.summary()["state_digest"] == summary["state_digest"]
+    rows = series_without_timings(py / "series.csv")
+    assert rows == series_without_timings(cli / "series.csv")
+    assert [r[0] for r in rows] == ["step", "50", "100", "120"]
+    assert (py / "scenario.toml").read_text() == (cli / "scenario.toml").read_text()
+    assert run_files(py) == run_files(cli)
+    assert "report.md" in run_files(py) and "plots/solver.png" in run_files(py)
+    # The report names the scenario file, as the CLI's does.
+    title = "# ballast run report: `pile.toml`"
+    assert (py / "report.md").read_text().splitlines()[0] == title
+    assert (cli / "report.md").read_text().splitlines()[0] == title
+
+
+def test_run_resumes_and_stops_bit_identically(tmp_path):
+    scenario = os.path.join(ROOT, "examples", "pile.toml")
+    whole = ballast.Simulation.from_toml(scenario)
+    whole.run(tmp_path / "whole", steps=100, quiet=True)
+    # An exception in `progress` stops the run after the step, checkpointed.
+    seen = []
+
+    def stop_at_40(k, t):
+        seen.append(k)
+        if k >= 40:
+            raise RuntimeError("enough")
+
+    out = tmp_path / "parts"
+    with pytest.raises(RuntimeError, match="enough"):
+        ballast.Simulation.from_toml(scenario).run(
+            out, steps=100, progress=stop_at_40, every=20, quiet=True
+        )
+    assert seen == [20, 40]
+    stopped = json.loads((out / "summary.json").read_text())
+    assert stopped["status"] == "interrupted" and stopped["steps"] == 40
+    sim = ballast.Simulation.from_toml(scenario)
+    done = sim.run(out, steps=100, resume=True, quiet=True)
+    assert done["status"] == "completed" and sim.step_index == 100
+    assert done["state_digest"] == whole.state_digest()
+    assert series_without_timings(out / "series.csv") == series_without_timings(
+        tmp_path / "whole" / "series.csv"
+    )
+
+
+def test_ctrl_c_stops_a_run_after_the_step(tmp_path):
     sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+
+    def ctrl_c(k, t):
+        if k == 30:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    with pytest.raises(KeyboardInterrupt, match="interrupted at step 30 of 100"):
+        sim.run(tmp_path / "run", steps=100, progress=ctrl_c, every=10, quiet=True)
+    s = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert s["status"] == "interrupted" and s["steps"] == 30 and sim.step_index == 30
+
+
+def test_run_refuses_bad_arguments_naming_them(tmp_path):
+    scenario = os.path.join(ROOT, "examples", "sliding_block.toml")
+    sim = ballast.Simulation.from_toml(scenario)
+    for kwargs, field in [
+        ({"steps": -1}, "steps"),
+        ({"steps": "10"}, "steps"),
+        ({"steps": 2.5}, "steps"),
+        ({"every": 0}, "every"),
+        ({"overwrite": "yes"}, "overwrite"),
+        ({"progress": 3}, "progress"),
+        ({"overwrite": True, "resume": True}, "resume"),
+    ]:
+        with pytest.raises(ValueError, match=field):
+            sim.run(tmp_path / "a", **kwargs)
+    with pytest.raises(ValueError, match="out"):
+        sim.run(None)
+    with pytest.raises(ValueError, match=r"resume=True .*no valid checkpoint"):
+        sim.run(tmp_path / "empty", steps=10, resume=True)
+    sim.run(tmp_path / "a", steps=10, quiet=True)
+    # A folder holds one run, and a run starts at step 0.
+    with pytest.raises(ValueError, match=r"out='.*': the folder holds another run.*overwrite=True"):
+        ballast.Simulation.from_toml(scenario).run(tmp_path / "a", steps=10)
+    with pytest.raises(ValueError, match="at step 10"):
+        sim.run(tmp_path / "b", steps=20)
+    again = ballast.Simulation.from_toml(scenario)
+    assert again.run(tmp_path / "a", steps=10, overwrite=True, quiet=True)["steps"] == 10
+    with pytest.raises(ValueError, match=r"steps asks for 5 steps"):
+        ballast.Simulation.from_toml(scenario).run(tmp_path / "a", steps=5, resume=True)
+
+
+def test_run_stopped_by_the_health_check_raises(tmp_path):
+    text = block_on_slab(0.5, 0.0).replace("gravity = [0.0, 0.0, -9.81]", "gravity = [0, 0, -1e200]")
+    assert "1e200" in text
+    with pytest.raises(ballast.DivergedError, match="step 1"):
+        ballast.Simulation.from_toml(text).run(tmp_path / "d", quiet=True)
+    s = json.loads((tmp_path / "d" / "summary.json").read_text())
+    assert s["status"] == "diverged" and s["divergence"]["step"] == 1
+
+
+def assert_releases_the_gil(call):
+    """A second Python thread ticks about once a millisecond while `call()` runs: none would
+    with the GIL held."""
     ticks = []
     stop = threading.Event()
 
@@ -143,14 +270,23 @@ def test_step_releases_the_gil():
     t.start()
     time.sleep(0.01)
     start = time.perf_counter()
-    sim.step(3000, every=10000)
+    call()
     end = time.perf_counter()
     stop.set()
     t.join()
     during = [x for x in ticks if start < x < end]
-    # Held GIL: no tick during the call. Released: about one per millisecond.
     assert end - start > 0.05
     assert len(during) > 10, f"{len(during)} ticks in {end - start:.3f} s"
+
+
+def test_run_releases_the_gil(tmp_path):
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+    assert_releases_the_gil(lambda: sim.run(tmp_path / "run", steps=1500, every=10000, quiet=True))
+
+
+def test_step_releases_the_gil():
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
+    assert_releases_the_gil(lambda: sim.step(3000, every=10000))
 
 
 def test_progress_is_called():

@@ -1,13 +1,11 @@
 //! `ballast`: run contact-dynamics scenarios and benchmarks.
 
 mod bench;
-mod charts;
 mod interrupt;
 mod progress;
-mod report;
-mod run;
 mod scaling;
 
+use ballast_run::{Failure, Observer};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -104,7 +102,7 @@ enum Command {
         /// Scaling study: DDM phases with fewer contacts run on the calling thread (the
         /// scenario key `ddm.min_parallel_contacts`: the value for 2 threads, scaled by
         /// 2/threads; scheduling only, results are unchanged).
-        #[arg(long, default_value_t = ballast_engine::solver::ddm::MIN_PARALLEL_CONTACTS)]
+        #[arg(long, default_value_t = ballast_engine::MIN_PARALLEL_CONTACTS)]
         min_parallel_contacts: usize,
         /// Scaling study: detection reuse distance in m (the scenario key
         /// `simulation.reuse_distance`; 0 = every pair detected anew each step).
@@ -224,9 +222,39 @@ const EXIT_DIVERGED: u8 = 3;
 /// shells' convention).
 const EXIT_INTERRUPTED: u8 = 130;
 
+/// `ballast run`'s front end: a progress bar (or plain lines), Ctrl-C and SIGTERM as stop
+/// requests once the steps start.
+struct Terminal {
+    quiet: bool,
+    progress: Option<progress::Progress>,
+}
+
+impl Observer for Terminal {
+    fn start(&mut self, total: u64) {
+        self.progress = Some(progress::Progress::new(total, self.quiet));
+        interrupt::install();
+    }
+
+    fn step(&mut self, done: u64, r: &ballast_engine::world::StepReport) {
+        if let Some(p) = &mut self.progress {
+            p.update(done, r.time, r.contacts, r.solve.iterations);
+        }
+    }
+
+    fn finish(&mut self) {
+        if let Some(p) = &self.progress {
+            p.finish();
+        }
+    }
+
+    fn stop_requested(&mut self) -> bool {
+        interrupt::requested()
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let result: Result<(), run::Failure> = match cli.command {
+    let result: Result<(), Failure> = match cli.command {
         Command::Run {
             file,
             preset,
@@ -240,24 +268,32 @@ fn main() -> ExitCode {
             subdomains,
             quiet,
         } => set_threads(threads)
-            .map_err(run::Failure::Error)
+            .map_err(Failure::Error)
             .and_then(|threads| {
-                run::run(&run::RunArgs {
-                    file: file.as_deref(),
-                    preset: preset.as_deref(),
-                    cache: if no_cache {
-                        None
-                    } else {
-                        cache.or_else(default_cache)
-                    },
-                    out: resume.as_deref().unwrap_or(&out),
-                    resume: resume.is_some(),
-                    overwrite,
-                    steps,
-                    threads,
-                    subdomains,
+                let mut observer = Terminal {
                     quiet,
-                })
+                    progress: None,
+                };
+                ballast_run::run(
+                    &ballast_run::RunArgs {
+                        file: file.as_deref(),
+                        preset: preset.as_deref(),
+                        cache: if no_cache {
+                            None
+                        } else {
+                            cache.or_else(default_cache)
+                        },
+                        out: resume.as_deref().unwrap_or(&out),
+                        resume: resume.is_some(),
+                        overwrite,
+                        steps,
+                        threads,
+                        subdomains,
+                        quiet,
+                    },
+                    &mut observer,
+                )
+                .map(|_| ())
             }),
         Command::Bench {
             json,
@@ -284,7 +320,7 @@ fn main() -> ExitCode {
             min_parallel_contacts,
             reuse_distance,
         })
-        .map_err(run::Failure::Error),
+        .map_err(Failure::Error),
         Command::Bench {
             json,
             grains,
@@ -294,19 +330,19 @@ fn main() -> ExitCode {
             ..
         } => set_threads(Some(threads))
             .and_then(|t| bench::bench(json.as_deref(), &grains, settle_steps, steps, t))
-            .map_err(run::Failure::Error),
+            .map_err(Failure::Error),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(run::Failure::Error(e)) => {
+        Err(Failure::Error(e)) => {
             eprintln!("error: {}", cut_lines(&e));
             ExitCode::FAILURE
         }
-        Err(run::Failure::Diverged(e)) => {
+        Err(Failure::Diverged(e)) => {
             eprintln!("error: {}", cut_lines(&e));
             ExitCode::from(EXIT_DIVERGED)
         }
-        Err(run::Failure::Interrupted(e)) => {
+        Err(Failure::Interrupted(e)) => {
             eprintln!("{}", cut_lines(&e));
             ExitCode::from(EXIT_INTERRUPTED)
         }

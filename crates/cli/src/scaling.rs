@@ -230,7 +230,7 @@ pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
             .file_stem()
             .map_or("scaling".into(), |s| s.to_string_lossy().to_string());
         let dir = path.with_file_name(format!("{stem}_plots"));
-        let points: Vec<crate::report::ScalingPoint> = cases
+        let points: Vec<ballast_run::report::ScalingPoint> = cases
             .iter()
             .map(|c| {
                 let t = &c.timings_s;
@@ -248,7 +248,7 @@ pub fn scaling(a: &ScalingArgs) -> Result<(), String> {
                 )
             })
             .collect();
-        if let Err(e) = crate::report::write_scaling_plots(&dir, &points) {
+        if let Err(e) = ballast_run::report::write_scaling_plots(&dir, &points) {
             eprintln!("warning: plots: {e}");
         }
         let text = serde_json::to_string_pretty(&cases).map_err(|e| e.to_string())?;

@@ -22,6 +22,7 @@ pub mod bodies;
 pub mod contacts;
 pub mod detection;
 pub mod digest;
+pub mod error;
 pub mod health;
 pub mod laws;
 pub mod math;
@@ -32,3 +33,24 @@ mod slices;
 pub mod solver;
 pub mod timing;
 pub mod world;
+
+pub use error::{Error, Result, ScenarioError};
+/// The 64-bit FNV-1a hash of checkpoints, also the cache key of scenes built on the engine.
+pub use output::checkpoint::fnv1a64;
+/// A uniformly distributed random rotation, as random grains are placed.
+pub use scenario::generate::random_rotation;
+/// The default of `[ddm] min_parallel_contacts` (on 2 threads).
+pub use solver::ddm::MIN_PARALLEL_CONTACTS;
+
+/// The types most programs on the engine use: `use ballast_engine::prelude::*;`.
+pub mod prelude {
+    pub use crate::bodies::{BodyKind, BodySet, Driver, Term};
+    pub use crate::math::{DMat3, DQuat, DVec3};
+    pub use crate::scenario::Scenario;
+    pub use crate::shapes::{ConvexPolyhedron, PolyhedronBuild, Shape, ShapeError};
+    pub use crate::solver::{
+        ContactProblem, ConvergenceNorm, CorrectionSettings, DdmSettings, SolverSettings,
+    };
+    pub use crate::world::{StepReport, StepSettings, World};
+    pub use crate::{Error, ScenarioError};
+}

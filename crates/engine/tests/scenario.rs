@@ -189,7 +189,7 @@ fn driver_terms_and_validation() {
         }],
         ..Default::default()
     };
-    let msg = bad.validate().unwrap_err();
+    let msg = bad.validate().unwrap_err().to_string();
     assert!(msg.contains("wy[0]") && msg.contains("end"), "{msg}");
 }
 

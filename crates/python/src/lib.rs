@@ -8,15 +8,13 @@ use ballast_engine::laws::ContactStatus;
 use ballast_engine::math::DVec3;
 use ballast_engine::output::checkpoint::{read_checkpoint_with_stats, write_checkpoint_with_stats};
 use ballast_engine::output::vtk::VtkWriter;
-use ballast_engine::output::{RunStats, Summary};
-use ballast_engine::scenario::Scenario;
 use ballast_engine::solver::{BlockMatrix, ContactProblem, ConvergenceNorm, SolverSettings};
-use ballast_engine::world::World;
-use ballast_railway::indicators::Indicators;
-use ballast_railway::{is_track_scenario, TrackScenario};
+use ballast_engine::world::{StepReport, World};
+use ballast_railway::TrackScenario;
+use ballast_run::{ArgNames, BuildOptions, Failure, Job, Observer, Plain, RunOptions};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use numpy::{PyReadonlyArray3, PyUntypedArrayMethods};
-use pyo3::exceptions::{PyIOError, PyRuntimeError, PyValueError};
+use pyo3::exceptions::{PyIOError, PyKeyboardInterrupt, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::{Path, PathBuf};
@@ -35,45 +33,100 @@ fn vec3_array<'py>(py: Python<'py>, v: &[DVec3]) -> Bound<'py, PyArray2<f64>> {
         .expect("n × 3 elements")
 }
 
-/// A simulation: a world stepping through a scenario (engine scenario or track scenario).
+pyo3::create_exception!(
+    ballast,
+    DivergedError,
+    PyRuntimeError,
+    "A run stopped by the health check: its state stopped being physical (the message names \
+     the step, the bodies and the quantity); its run folder is written."
+);
+
+/// A simulation: a world stepping through a scenario (engine scenario or track scenario),
+/// with what its run folder needs (the run library's [`Job`]).
 #[pyclass(module = "ballast._ballast")]
 struct Simulation {
-    world: World,
-    stats: RunStats,
-    /// Track runs: the indicators of `series.csv`.
-    indicators: Option<Indicators>,
-    /// The resolved scenario (what `scenario.toml` of a CLI run holds).
-    scenario: String,
-    /// The scenario's step count (a track scenario: its whole cycle).
-    steps: u64,
+    job: Job,
     /// The ParaView series `write_vtk` last wrote, and its folder.
     vtk: Option<(PathBuf, VtkWriter)>,
 }
 
-/// Builds a simulation from scenario text.
-fn build(text: &str, cache: Option<&Path>) -> PyResult<Simulation> {
-    if is_track_scenario(text) {
-        let s = TrackScenario::from_toml(text).map_err(value_error)?;
-        let model = s.build(cache, &mut |_| {}).map_err(value_error)?;
-        Ok(Simulation {
-            world: model.world,
-            stats: RunStats::default(),
-            indicators: Some(model.indicators),
-            scenario: s.to_toml(),
-            steps: s.steps(),
-            vtk: None,
-        })
-    } else {
-        let s = Scenario::from_toml(text).map_err(|e| value_error(e.0))?;
-        let world = s.build().map_err(|e| value_error(e.0))?;
-        Ok(Simulation {
-            world,
-            stats: RunStats::default(),
-            indicators: None,
-            scenario: text.to_string(),
-            steps: s.steps(),
-            vtk: None,
-        })
+/// How `Simulation.run`'s messages name its arguments.
+const NAMES: ArgNames = ArgNames {
+    out: |d| format!("out='{}'", d.display()),
+    resume: |d| format!("resume=True (out='{}')", d.display()),
+    resume_command: |d| format!("`run('{}', resume=True)`", d.display()),
+    overwrite: "overwrite=True",
+    steps: "steps",
+    subdomains: "subdomains",
+};
+
+/// Builds a simulation from scenario text; `source` names it in messages and reports.
+fn build(source: &str, text: &str, cache: Option<&Path>) -> PyResult<Simulation> {
+    let options = BuildOptions {
+        cache,
+        subdomains: None,
+        quiet: true,
+        names: &NAMES,
+    };
+    let job = Job::build(source, text, &options, &mut Plain).map_err(value_error)?;
+    Ok(Simulation { job, vtk: None })
+}
+
+/// `Simulation.run`'s view of a run: `progress(step_index, time)` every `every` steps and at
+/// the end, Python's signals (Ctrl-C) looked at between steps, messages on `sys.stderr`. The
+/// first exception (from `progress` or a signal) stops the run after the step.
+struct PyObserver {
+    progress: Option<Py<PyAny>>,
+    every: u64,
+    total: u64,
+    error: Option<PyErr>,
+    /// When Python's signals were last looked at.
+    checked: std::time::Instant,
+}
+
+/// How often a run looks at Python's signals (s): often enough for Ctrl-C, seldom enough not
+/// to wait on other Python threads for the GIL every step.
+const SIGNAL_CHECK_S: f64 = 0.1;
+
+impl Observer for PyObserver {
+    fn start(&mut self, total: u64) {
+        self.total = total;
+    }
+
+    fn step(&mut self, done: u64, r: &StepReport) {
+        if self.error.is_some() {
+            return;
+        }
+        let report = done.is_multiple_of(self.every) || done == self.total;
+        let check = self.checked.elapsed().as_secs_f64() >= SIGNAL_CHECK_S;
+        if !report && !check {
+            return;
+        }
+        self.checked = std::time::Instant::now();
+        Python::attach(|py| {
+            let called = match (&self.progress, report) {
+                (Some(f), true) => f.call1(py, (r.step, r.time)).map(|_| ()),
+                _ => Ok(()),
+            };
+            if let Err(e) = called.and_then(|()| py.check_signals()) {
+                self.error = Some(e);
+            }
+        });
+    }
+
+    fn stop_requested(&mut self) -> bool {
+        self.error.is_some()
+    }
+
+    fn message(&mut self, line: &str) {
+        let written = Python::attach(|py| -> PyResult<()> {
+            let err = py.import("sys")?.getattr("stderr")?;
+            err.call_method1("write", (format!("{line}\n"),))?;
+            Ok(())
+        });
+        if written.is_err() {
+            eprintln!("{line}");
+        }
     }
 }
 
@@ -96,13 +149,15 @@ impl Simulation {
     #[pyo3(signature = (text_or_path, cache = None))]
     fn from_toml(text_or_path: &str, cache: Option<PathBuf>) -> PyResult<Self> {
         let path = Path::new(text_or_path);
-        let text = if !text_or_path.contains('\n') && path.is_file() {
-            std::fs::read_to_string(path)
-                .map_err(|e| PyIOError::new_err(format!("cannot read {text_or_path}: {e}")))?
+        // Messages and the report name a file by its path, text as "scenario".
+        let (source, text) = if !text_or_path.contains('\n') && path.is_file() {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| PyIOError::new_err(format!("cannot read {text_or_path}: {e}")))?;
+            (text_or_path, text)
         } else {
-            text_or_path.to_string()
+            ("scenario", text_or_path.to_string())
         };
-        build(&text, cache.as_deref())
+        build(source, &text, cache.as_deref())
     }
 
     /// A built-in track scenario (`default`, `paper`) with `overlay` (TOML text) set over it.
@@ -115,7 +170,7 @@ impl Simulation {
             toml::from_str(overlay_toml).map_err(|e| value_error(format!("overrides: {e}")))?;
         overlay(&mut table, over);
         let text = toml::to_string(&table).map_err(value_error)?;
-        build(&text, cache.as_deref())
+        build(&format!("preset {preset}"), &text, cache.as_deref())
     }
 
     /// Advances `n` steps with the GIL released; `progress(step_index, time)` is called
@@ -132,78 +187,149 @@ impl Simulation {
         let mut done = 0;
         while done < n {
             let chunk = (n - done).min(every);
-            let (world, stats) = (&mut self.world, &mut self.stats);
+            let job = &mut self.job;
             py.detach(|| {
                 for _ in 0..chunk {
-                    let r = world.step();
-                    stats.add(&r);
+                    job.step();
                 }
             });
             done += chunk;
             if let Some(f) = &progress {
-                f.call1(py, (self.world.step_index, self.world.time))?;
+                f.call1(py, (self.world().step_index, self.world().time))?;
             }
         }
         Ok(())
     }
 
+    /// Runs the simulation into the run folder `out`, as `ballast run` does (`scenario.toml`,
+    /// `series.csv`, `summary.json`, `report.md`, `plots/`, `*.pvd` with `vtk/`,
+    /// `checkpoints/`, `sections/` for track runs), up to step `steps` (the scenario's count
+    /// when `None`), with the GIL released; or continues the run in `out` from its newest
+    /// checkpoint (`resume`). Returns `summary.json` as JSON text.
+    #[pyo3(signature = (out, steps = None, overwrite = false, resume = false, progress = None, every = 100, quiet = false))]
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &mut self,
+        py: Python<'_>,
+        out: PathBuf,
+        steps: Option<u64>,
+        overwrite: bool,
+        resume: bool,
+        progress: Option<Py<PyAny>>,
+        every: u64,
+        quiet: bool,
+    ) -> PyResult<String> {
+        if every == 0 {
+            return Err(value_error(
+                "every = 0: must be a whole number of steps ≥ 1",
+            ));
+        }
+        if overwrite && resume {
+            return Err(value_error(
+                "overwrite=True with resume=True: a resumed run keeps its folder's files; give \
+                 one of them",
+            ));
+        }
+        if self.job.world().is_detected() {
+            // A run's first step detects and checks its own contacts.
+            return Err(PyRuntimeError::new_err(
+                "run: a step is detected but not solved; call step() first",
+            ));
+        }
+        self.vtk = None;
+        let options = RunOptions {
+            out: &out,
+            resume,
+            overwrite,
+            steps,
+            threads: rayon_threads(),
+            quiet,
+            names: &NAMES,
+        };
+        let mut observer = PyObserver {
+            progress,
+            every,
+            total: 0,
+            error: None,
+            checked: std::time::Instant::now(),
+        };
+        let job = &mut self.job;
+        let result = py.detach(|| job.run(&options, &mut observer));
+        match (result, observer.error) {
+            (Err(Failure::Interrupted(m)), Some(e))
+                if e.is_instance_of::<PyKeyboardInterrupt>(py) =>
+            {
+                Err(PyKeyboardInterrupt::new_err(m))
+            }
+            (_, Some(e)) => Err(e),
+            (Ok(o), None) => serde_json::to_string(&o.summary)
+                .map_err(|e| PyRuntimeError::new_err(e.to_string())),
+            (Err(Failure::Diverged(m)), None) => Err(DivergedError::new_err(m)),
+            (Err(Failure::Interrupted(m)), None) => Err(PyKeyboardInterrupt::new_err(m)),
+            (Err(Failure::Error(m)), None) => Err(value_error(m)),
+        }
+    }
+
     /// Simulated time (s).
     #[getter]
     fn time(&self) -> f64 {
-        self.world.time
+        self.world().time
     }
 
     /// Steps done.
     #[getter]
     fn step_index(&self) -> u64 {
-        self.world.step_index
+        self.world().step_index
     }
 
     /// Number of bodies.
     #[getter]
     fn body_count(&self) -> usize {
-        self.world.bodies.len()
+        self.world().bodies.len()
     }
 
     /// The scenario's step count (a track scenario: its whole cycle).
     #[getter]
     fn steps(&self) -> u64 {
-        self.steps
+        self.job.steps()
     }
 
     /// Time step (s).
     #[getter]
     fn dt(&self) -> f64 {
-        self.world.settings.dt
+        self.world().settings.dt
     }
 
     /// The resolved scenario (TOML).
     #[getter]
     fn scenario(&self) -> String {
-        self.scenario.clone()
+        self.job.scenario().to_string()
     }
 
     /// Hash of every body's position, orientation and velocities (as in `summary.json`).
     fn state_digest(&self) -> String {
-        state_digest(&self.world.bodies)
+        state_digest(&self.world().bodies)
     }
 
     /// The keys of `summary.json`, as JSON text.
     fn summary_json(&self) -> PyResult<String> {
-        let s = Summary::new(&self.world, &self.stats, rayon_threads());
+        let s = self
+            .job
+            .summary(rayon_threads())
+            .map_err(PyRuntimeError::new_err)?;
         serde_json::to_string(&s).map_err(|e| PyRuntimeError::new_err(e.to_string()))
     }
 
     /// Body centres, `(N, 3)` (m).
     #[getter]
     fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        vec3_array(py, &self.world.bodies.position)
+        vec3_array(py, &self.world().bodies.position)
     }
 
     /// Body orientations as unit quaternions `(x, y, z, w)` (scalar last), `(N, 4)`.
     #[getter]
     fn orientations<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let q = &self.world.bodies.orientation;
+        let q = &self.world().bodies.orientation;
         let flat: Vec<f64> = q.iter().flat_map(|q| q.to_array()).collect();
         flat.into_pyarray(py)
             .reshape([q.len(), 4])
@@ -213,19 +339,19 @@ impl Simulation {
     /// Body velocities, `(N, 3)` (m/s).
     #[getter]
     fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        vec3_array(py, &self.world.bodies.velocity)
+        vec3_array(py, &self.world().bodies.velocity)
     }
 
     /// Body angular velocities (world frame), `(N, 3)` (rad/s).
     #[getter]
     fn angular_velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        vec3_array(py, &self.world.bodies.angular_velocity)
+        vec3_array(py, &self.world().bodies.angular_velocity)
     }
 
     /// Body masses (kg; `inf` for bodies without one: fixed bodies and planes).
     #[getter]
     fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        let b = &self.world.bodies;
+        let b = &self.world().bodies;
         let m: Vec<f64> = b
             .inv_mass
             .iter()
@@ -237,7 +363,7 @@ impl Simulation {
     /// Body kinds: `"dynamic"`, `"kinematic"` or `"fixed"`.
     #[getter]
     fn kinds(&self) -> Vec<String> {
-        self.world
+        self.world()
             .bodies
             .kind
             .iter()
@@ -248,14 +374,14 @@ impl Simulation {
     /// Body friction groups.
     #[getter]
     fn groups<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<u32>> {
-        self.world.bodies.group.clone().into_pyarray(py)
+        self.world().bodies.group.clone().into_pyarray(py)
     }
 
     /// The contacts of the last step (or of the step detected by `detect()`): arrays
     /// `body1`, `body2`, `point`, `normal`, `gap`, `impulse` (local frame `(n, t, s)`, N·s),
     /// `status` (0 open, 1 stick, 2 slide).
     fn contacts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let c = &self.world.contacts;
+        let c = &self.world().contacts;
         let d = PyDict::new(py);
         d.set_item("body1", c.body1.clone().into_pyarray(py))?;
         d.set_item("body2", c.body2.clone().into_pyarray(py))?;
@@ -280,7 +406,7 @@ impl Simulation {
     /// Detects the next step's contacts and builds its local problems (the step's first
     /// phase); the next `step()` solves them. Returns the largest overlap (m).
     fn detect(&mut self) -> f64 {
-        self.world.detect()
+        self.job.world_mut().detect()
     }
 
     /// The contact problem of the next step (detected first if needed): block-sparse `W`
@@ -290,11 +416,11 @@ impl Simulation {
     /// `inv_inertia` (zero on a degree of freedom a drive imposes), `v_free` `(nb, 6)`,
     /// `H` as blocks `H_blocks` `(nh, 6, 3)` at `H_body`, `H_contact`, and `b` `(n, 3)`.
     fn contact_problem<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        self.world.detect();
-        let p = self.world.contact_problem();
+        self.job.world_mut().detect();
+        let p = self.world().contact_problem();
         let d = problem_dict(py, &p)?;
-        let g = self.world.global_problem(&p);
-        let b = &self.world.bodies;
+        let g = self.world().global_problem(&p);
+        let b = &self.world().bodies;
         let nb = g.bodies.len();
         let mat_array = |ms: Vec<ballast_engine::math::DMat3>| {
             let k = ms.len();
@@ -360,22 +486,22 @@ impl Simulation {
             |e: std::io::Error| PyIOError::new_err(format!("write_vtk {}: {e}", dir.display()));
         let same = matches!(&self.vtk, Some((d, _)) if *d == dir);
         if !same {
-            let w = VtkWriter::resume(&dir, self.world.time).map_err(io)?;
+            let w = VtkWriter::resume(&dir, self.world().time).map_err(io)?;
             self.vtk = Some((dir.clone(), w));
         }
         let (_, w) = self.vtk.as_mut().expect("opened above");
-        w.write_frame(&self.world).map_err(io)
+        w.write_frame(self.job.world()).map_err(io)
     }
 
     /// The track indicators (the columns `series.csv` adds) at the current state.
     fn indicators<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let Some(ind) = &self.indicators else {
+        let Some(ind) = self.job.indicators() else {
             return Err(PyValueError::new_err(
                 "indicators: this simulation is not a track scenario (no [track] table)",
             ));
         };
         let d = PyDict::new(py);
-        for (name, v) in ind.names().iter().zip(ind.values(&self.world)) {
+        for (name, v) in ind.names().iter().zip(ind.values(self.world())) {
             d.set_item(name, v)?;
         }
         Ok(d)
@@ -383,22 +509,28 @@ impl Simulation {
 
     /// Writes a checkpoint (atomic) from which `resume` continues bit-identically.
     fn checkpoint(&self, path: PathBuf) -> PyResult<()> {
-        if self.world.is_detected() {
+        if self.world().is_detected() {
             return Err(PyRuntimeError::new_err(
                 "checkpoint: a step is detected but not solved; call step() first",
             ));
         }
-        write_checkpoint_with_stats(&self.world, Some(&self.stats), &path)
+        write_checkpoint_with_stats(self.world(), Some(self.job.stats()), &path)
             .map_err(|e| PyIOError::new_err(format!("checkpoint {}: {e}", path.display())))
     }
 
     /// Reads a checkpoint written by `checkpoint` into this simulation, which must be built
     /// from the same scenario.
     fn load_checkpoint(&mut self, path: PathBuf) -> PyResult<()> {
-        let stats = read_checkpoint_with_stats(&path, &mut self.world)
+        let stats = read_checkpoint_with_stats(&path, self.job.world_mut())
             .map_err(|e| value_error(format!("checkpoint {}: {e}", path.display())))?;
-        self.stats = stats.unwrap_or_default();
+        *self.job.stats_mut() = stats.unwrap_or_default();
         Ok(())
+    }
+}
+
+impl Simulation {
+    fn world(&self) -> &World {
+        self.job.world()
     }
 }
 
@@ -543,6 +675,7 @@ fn preset_toml(name: &str) -> PyResult<String> {
 #[pymodule]
 fn _ballast(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Simulation>()?;
+    m.add("DivergedError", m.py().get_type::<DivergedError>())?;
     m.add_function(wrap_pyfunction!(solve_fc3d_blocks, m)?)?;
     m.add_function(wrap_pyfunction!(preset_toml, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

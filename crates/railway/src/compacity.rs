@@ -325,7 +325,7 @@ fn surface_volume(faces: &[Vec<DVec3>], o: DVec3) -> f64 {
 mod tests {
     use super::*;
     use ballast_engine::bodies::BodyKind;
-    use ballast_engine::scenario::generate::random_rotation;
+    use ballast_engine::random_rotation;
     use ballast_engine::shapes::random::{random_grain, GrainParams};
     use ballast_engine::shapes::PolyhedronBuild;
     use proptest::prelude::*;

@@ -28,7 +28,7 @@
 
 use crate::grading::{GradingCurve, SizeClass};
 use ballast_engine::math::DVec3;
-use ballast_engine::scenario::generate::random_rotation;
+use ballast_engine::random_rotation;
 use ballast_engine::shapes::random::{random_grain, GrainParams};
 use ballast_engine::shapes::{PolyhedronBuild, ShapeError};
 use rand::seq::SliceRandom;

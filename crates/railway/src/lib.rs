@@ -12,12 +12,15 @@
 //! * [`preparation`]: the deposited, cached ballast bed;
 //! * [`indicators`]: compacity, block heights, tine forces, coordination through a run;
 //! * [`sections`]: vertical sections through the bed at chosen moments (speed, load);
-//! * [`scenario`]: track scenario files and the `default` and `paper` presets.
+//! * [`scenario`]: track scenario files and the `default` and `paper` presets;
+//! * [`defaults`]: the engine settings the scenario and the preparation share;
+//! * [`error`]: [`Error`], what the scenario and preparation calls return, and [`FieldError`].
 //!
 //! Conventions: SI units except sieve sizes, given in millimetres as in the standards; the
 //! sieve size of a grain is its volume-equivalent diameter (see [`grading`]).
 
 pub mod compacity;
+pub mod defaults;
 pub mod error;
 pub mod grading;
 pub mod grains;
@@ -30,7 +33,7 @@ pub mod tamping;
 pub mod track;
 
 pub use compacity::{clipped_volume, compacity, solid_volume, CompacityError};
-pub use error::FieldError;
+pub use error::{Error, FieldError};
 pub use grading::{GradingCurve, GradingError, GradingTable, SizeClass};
 pub use grains::{generate_grains, Amount, GrainError, GrainSpec};
 pub use scenario::{is_track_scenario, TrackModel, TrackScenario};

@@ -41,12 +41,13 @@
 //! and takes the poses from the file: the prepared bed is bit-identical to a fresh preparation.
 
 use crate::compacity::clipped_volume;
-use crate::error::{check_range, FieldError};
+use crate::defaults::{default_ddm, DEFAULT_ALERT};
+use crate::error::{check_range, Error, FieldError};
 use crate::grains::{generate_grains, Amount, GrainSpec};
 use crate::scene::{build_bodies, Blocks, PlacedGrain, TrackFriction};
 use crate::track::TrackSpec;
+use ballast_engine::fnv1a64;
 use ballast_engine::math::{DQuat, DVec3};
-use ballast_engine::output::checkpoint::fnv1a64;
 use ballast_engine::output::write_atomic;
 use ballast_engine::shapes::Shape;
 use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, SolverSettings};
@@ -118,7 +119,7 @@ impl Default for PreparationSpec {
             dt: 5e-4,
             tolerance: 1e-2,
             max_iterations: 40,
-            alert: crate::scenario::DEFAULT_ALERT,
+            alert: DEFAULT_ALERT,
             settle_time: 0.25,
             block_settle_time: 0.2,
             rest_speed: 0.05,
@@ -325,11 +326,11 @@ pub fn load_or_prepare(
     friction: &TrackFriction,
     cache_dir: Option<&Path>,
     progress: &mut dyn FnMut(PrepProgress),
-) -> Result<(PreparedSample, Option<String>), String> {
-    track.validate().map_err(|e| e.to_string())?;
-    ballast.grains.validate().map_err(|e| e.to_string())?;
-    prep.validate().map_err(|e| e.to_string())?;
-    friction.validate().map_err(|e| e.to_string())?;
+) -> Result<(PreparedSample, Option<String>), Error> {
+    track.validate()?;
+    ballast.grains.validate()?;
+    prep.validate()?;
+    friction.validate()?;
     let key = key_json(track, ballast, prep, friction);
     let path = cache_dir
         .filter(|_| prep.cache)
@@ -362,10 +363,9 @@ fn generate(
     track: &TrackSpec,
     ballast: &BallastSpec,
     prep: &PreparationSpec,
-) -> Result<Vec<PlacedGrain>, String> {
+) -> Result<Vec<PlacedGrain>, Error> {
     let volume = prep.compacity * prep.overfill * track.bed_box().volume();
-    let builds = generate_grains(&ballast.grains, Amount::SolidVolume(volume), ballast.seed)
-        .map_err(|e| e.to_string())?;
+    let builds = generate_grains(&ballast.grains, Amount::SolidVolume(volume), ballast.seed)?;
     Ok(builds
         .into_iter()
         .enumerate()
@@ -389,7 +389,7 @@ pub fn prepare(
     prep: &PreparationSpec,
     friction: &TrackFriction,
     progress: &mut dyn FnMut(PrepProgress),
-) -> Result<PreparedSample, String> {
+) -> Result<PreparedSample, Error> {
     load_or_prepare(
         track,
         ballast,
@@ -432,7 +432,7 @@ fn prepare_from(
             ..SolverSettings::default()
         },
         // Parallel NLGS on the same split as the default job (deterministic, any thread count).
-        ddm: Some(crate::scenario::default_ddm()),
+        ddm: Some(default_ddm()),
         ..StepSettings::default()
     };
     let density = ballast.grains.density;

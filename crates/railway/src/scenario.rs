@@ -31,7 +31,8 @@
 //! [ddm]
 //! ```
 
-use crate::error::{check_range, refuse, FieldError};
+pub use crate::defaults::{default_ddm, DEFAULT_ALERT};
+use crate::error::{check_range, refuse, Error, FieldError};
 use crate::grading::{GradingCurve, GradingTable};
 use crate::grains::GrainSpec;
 use crate::indicators::Indicators;
@@ -43,6 +44,7 @@ use crate::tamping::{Cycle, TampingSpec};
 use crate::track::TrackSpec;
 use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, DdmSettings, SolverSettings};
 use ballast_engine::world::{StepSettings, World};
+use ballast_engine::ScenarioError;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -192,31 +194,16 @@ fn track_solver() -> SolverSettings {
 
 /// The track solver defaults with the keys of a `[solver]` table on top (unknown keys and
 /// wrong types are refused by name).
-fn merge_solver(table: Option<toml::Table>) -> Result<SolverSettings, String> {
+fn merge_solver(table: Option<toml::Table>) -> Result<SolverSettings, Error> {
     let Some(table) = table else {
         return Ok(track_solver());
     };
-    let mut merged = toml::Table::try_from(track_solver()).map_err(|e| e.to_string())?;
+    let mut merged =
+        toml::Table::try_from(track_solver()).map_err(|e| Error::Toml(e.to_string()))?;
     merged.extend(table);
     merged
         .try_into()
-        .map_err(|e: toml::de::Error| format!("[solver]: {}", e.message()))
-}
-
-/// Default alert distance of track runs and of their preparation (m). The speculative margins
-/// already cover each body's own motion: 0.4 mm rather than 1 mm leaves 16 % fewer contacts
-/// (fewer idle ones) with the same overlaps (their 99th and 99.9th percentiles) on the
-/// default cycle; see BENCHMARKS.md.
-pub const DEFAULT_ALERT: f64 = 4e-4;
-
-/// The default job's domain decomposition: 2 × 2 contact-balanced boxes (along and across the
-/// track), more subdomains than the 2 cores this job is sized for. The split depends on the
-/// scene alone, so results are the same on any number of threads.
-pub fn default_ddm() -> DdmSettings {
-    DdmSettings {
-        subdomains: [2, 2, 1],
-        ..DdmSettings::default()
-    }
+        .map_err(|e: toml::de::Error| Error::Toml(format!("[solver]: {}", e.message())))
 }
 
 /// Writes `top` over `base`, key by key; tables are merged recursively, any other value
@@ -316,24 +303,28 @@ impl TrackScenario {
     /// # Errors
     ///
     /// TOML syntax or unknown fields (with the line), or the first invalid field.
-    pub fn from_toml(text: &str) -> Result<Self, String> {
+    pub fn from_toml(text: &str) -> Result<Self, Error> {
         // The file alone first: its shape errors and unknown keys, with their lines.
         let file: toml::Table = toml::from_str::<TrackFile>(text)
             .and_then(|_| toml::from_str(text))
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| Error::Toml(e.to_string()))?;
         let mut merged: toml::Table = toml::from_str(&Self::default_preset().to_toml())
             .expect("the default preset's TOML reads back");
         overlay(&mut merged, file);
         let f: TrackFile = merged
             .try_into()
-            .map_err(|e: toml::de::Error| e.to_string())?;
+            .map_err(|e: toml::de::Error| Error::Toml(e.to_string()))?;
         let mut grains = GrainSpec::default();
         let mut seed = BallastSpec::default().seed;
         if let Some(b) = f.ballast {
             if let Some(g) = b.grading {
                 grains.grading = match g {
                     GradingInput::Table(t) => GradingCurve::from_table(t.sieves_mm, t.passing)
-                        .map_err(|e| format!("ballast.{e}"))?,
+                        .map_err(|e| FieldError {
+                            field: format!("ballast.{}", e.field),
+                            value: e.value,
+                            allowed: e.allowed,
+                        })?,
                     GradingInput::Named(n) => match n.as_str() {
                         "31.5/50" => GradingCurve::en13450_31_5_50(),
                         "31.5/50 coarse" => GradingCurve::en13450_31_5_50_coarse(),
@@ -345,7 +336,7 @@ impl TrackScenario {
                                 "\"31.5/50\", \"31.5/50 coarse\", \"25/50\" or a table \
                                  { sieves_mm = [...], passing = [...] }",
                             )
-                            .to_string())
+                            .into())
                         }
                     },
                 };
@@ -425,28 +416,27 @@ impl TrackScenario {
     /// # Errors
     ///
     /// The first invalid field, its value and what is allowed.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Error> {
         let s = &self.simulation;
-        check_range("simulation.dt", s.dt, 1e-7, 1e-2, "s").map_err(|e| e.to_string())?;
-        check_range("simulation.theta", s.theta, 0.5, 1.0, "").map_err(|e| e.to_string())?;
-        check_range("simulation.alert", s.alert, 0.0, 0.1, "m").map_err(|e| e.to_string())?;
+        check_range("simulation.dt", s.dt, 1e-7, 1e-2, "s")?;
+        check_range("simulation.theta", s.theta, 0.5, 1.0, "")?;
+        check_range("simulation.alert", s.alert, 0.0, 0.1, "m")?;
         check_range(
             "simulation.reuse_distance",
             s.reuse_distance,
             0.0,
             0.25 * s.alert,
             "m",
-        )
-        .map_err(|e| e.to_string())?;
+        )?;
         if s.output_interval == 0 {
-            return Err(refuse("simulation.output_interval", 0, "≥ 1 step").to_string());
+            return Err(refuse("simulation.output_interval", 0, "≥ 1 step").into());
         }
         for (field, v) in [
             ("simulation.max_speed", s.max_speed),
             ("simulation.max_overlap", s.max_overlap),
         ] {
             if let Some(v) = v.filter(|v| !(v.is_finite() && *v > 0.0)) {
-                return Err(refuse(field, v, "a finite number > 0").to_string());
+                return Err(refuse(field, v, "a finite number > 0").into());
             }
         }
         if s.steps == Some(0) {
@@ -455,38 +445,37 @@ impl TrackScenario {
                 0,
                 "≥ 1 step (or absent: the whole cycle)",
             )
-            .to_string());
+            .into());
         }
-        self.track.validate().map_err(|e| e.to_string())?;
+        self.track.validate()?;
         // The grain parameters are the file's [ballast] keys: name them so.
         self.ballast.grains.validate().map_err(|e| match e {
             crate::grains::GrainError::Field {
                 field,
                 value,
                 allowed,
-            } => format!(
-                "ballast.{} = {value}: {allowed}",
-                field.trim_start_matches("grains.")
-            ),
-            e => e.to_string(),
+            } => Error::Field(FieldError {
+                field: format!("ballast.{}", field.trim_start_matches("grains.")),
+                value,
+                allowed,
+            }),
+            e => e.into(),
         })?;
-        self.preparation.validate().map_err(|e| e.to_string())?;
-        self.tamping
-            .validate(&self.track)
-            .map_err(|e| e.to_string())?;
-        self.friction.validate().map_err(|e| e.to_string())?;
+        self.preparation.validate()?;
+        self.tamping.validate(&self.track)?;
+        self.friction.validate()?;
         check_range(
             "indicators.depth",
             self.indicators.depth,
             1e-3,
             self.track.depth,
             "m",
-        )
-        .map_err(|e| e.to_string())?;
-        self.solver.validate()?;
-        self.correction.validate()?;
+        )?;
+        // The engine's settings name their table already ("solver.tolerance = …").
+        self.solver.validate().map_err(ScenarioError)?;
+        self.correction.validate().map_err(ScenarioError)?;
         if let Some(d) = &self.ddm {
-            d.validate()?;
+            d.validate().map_err(ScenarioError)?;
         }
         Ok(())
     }
@@ -541,7 +530,7 @@ impl TrackScenario {
         &self,
         cache_dir: Option<&Path>,
         progress: &mut dyn FnMut(PrepProgress),
-    ) -> Result<TrackModel, String> {
+    ) -> Result<TrackModel, Error> {
         self.validate()?;
         let (sample, warning) = load_or_prepare(
             &self.track,
@@ -610,10 +599,13 @@ mod tests {
         assert_eq!(s.solver.norm, ConvergenceNorm::NaturalMap);
         let none = TrackScenario::from_toml("[track]\n").unwrap();
         assert_eq!(none.solver, track_solver());
-        let e = TrackScenario::from_toml("[track]\n[solver]\nsweeps = 3\n").unwrap_err();
+        let e = TrackScenario::from_toml("[track]\n[solver]\nsweeps = 3\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("[solver]") && e.contains("sweeps"), "{e}");
-        let e =
-            TrackScenario::from_toml("[track]\n[solver]\nmax_iterations = \"many\"\n").unwrap_err();
+        let e = TrackScenario::from_toml("[track]\n[solver]\nmax_iterations = \"many\"\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("[solver]"), "{e}");
     }
 
@@ -635,9 +627,13 @@ mod tests {
         expected.ddm.as_mut().unwrap().inner_sweeps = 2;
         expected.tamping.squeeze_force = 1e3;
         assert_eq!(s, expected);
-        let e = TrackScenario::from_toml("[track]\n[tamping]\nsqueeze_forces = 1e3\n").unwrap_err();
+        let e = TrackScenario::from_toml("[track]\n[tamping]\nsqueeze_forces = 1e3\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("squeeze_forces"), "{e}");
-        let e = TrackScenario::from_toml("[track]\n[tamping]\nsqueeze_force = -1.0\n").unwrap_err();
+        let e = TrackScenario::from_toml("[track]\n[tamping]\nsqueeze_force = -1.0\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("tamping.squeeze_force"), "{e}");
     }
 

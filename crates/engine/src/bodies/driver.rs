@@ -26,6 +26,7 @@
 //! `attached_to = N` makes a body a rigid part of body N (a tine's shaft on its blade): it
 //! has no program of its own, moves with N, and the impulses of its contacts act on N.
 
+use crate::error::ScenarioError;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::TAU;
 
@@ -98,12 +99,12 @@ impl Term {
     }
 
     /// Checks the parameters; the error says what is wrong and what is allowed.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ScenarioError> {
         let finite = |name: &str, v: f64| {
             if v.is_finite() {
                 Ok(())
             } else {
-                Err(format!("{name} = {v} must be a finite number"))
+                Err(format!("{name} = {v} must be a finite number").into())
             }
         };
         match self {
@@ -119,9 +120,9 @@ impl Term {
                 finite("from", *from)?;
                 finite("to", *to)?;
                 if end <= start {
-                    return Err(format!(
-                        "ramp end = {end} must be greater than start = {start}"
-                    ));
+                    return Err(
+                        format!("ramp end = {end} must be greater than start = {start}").into(),
+                    );
                 }
                 Ok(())
             }
@@ -131,7 +132,7 @@ impl Term {
                         "table needs as many times as values, at least one (got {} times, {} values)",
                         times.len(),
                         values.len()
-                    ));
+                    ).into());
                 }
                 for (k, w) in times.windows(2).enumerate() {
                     if w[1] <= w[0] {
@@ -141,7 +142,8 @@ impl Term {
                             w[0],
                             k + 1,
                             w[1]
-                        ));
+                        )
+                        .into());
                     }
                 }
                 for v in times.iter().chain(values) {
@@ -160,12 +162,12 @@ impl Term {
                 finite("phase", *phase)?;
                 finite("start", *start)?;
                 if !(frequency.is_finite() && *frequency >= 0.0) {
-                    return Err(format!(
-                        "frequency = {frequency} must be finite and ≥ 0 (Hz)"
-                    ));
+                    return Err(
+                        format!("frequency = {frequency} must be finite and ≥ 0 (Hz)").into(),
+                    );
                 }
                 if end.is_nan() || end < start {
-                    return Err(format!("sine end = {end} must be ≥ start = {start}"));
+                    return Err(format!("sine end = {end} must be ≥ start = {start}").into());
                 }
                 Ok(())
             }
@@ -394,10 +396,10 @@ impl Driver {
     }
 
     /// Checks every term; the error names the degree of freedom and the term index.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ScenarioError> {
         if let Some(r) = self.release_at {
             if !r.is_finite() {
-                return Err(format!("release_at = {r} must be a finite time (s)"));
+                return Err(format!("release_at = {r} must be a finite time (s)").into());
             }
         }
         for (name, limits, unit) in [
@@ -407,7 +409,8 @@ impl Driver {
             if limits.iter().any(|&f| f.is_nan() || f < 0.0) {
                 return Err(format!(
                     "{name} = {limits:?} must hold three values ≥ 0 {unit} (inf: no limit)"
-                ));
+                )
+                .into());
             }
         }
         for (name, p) in self.dofs() {
@@ -430,7 +433,8 @@ impl Driver {
                 return Err(format!(
                     "attached_to = {n}: an attached body moves with body {n} only (no \
                      profiles, limits or release_at of its own)"
-                ));
+                )
+                .into());
             }
         }
         Ok(())

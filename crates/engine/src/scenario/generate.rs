@@ -1,6 +1,7 @@
 //! Generated packs of random grains: a loose lattice of seeded random polyhedra inside a box,
 //! ready to be poured (used by scenarios, tests and benchmarks).
 
+use crate::error::ScenarioError;
 use crate::math::{DQuat, DVec3};
 use crate::shapes::random::{random_grain, GrainParams};
 use crate::shapes::{PolyhedronBuild, ShapeError};
@@ -43,40 +44,37 @@ pub(crate) fn one() -> f64 {
 
 impl GrainPack {
     /// Checks the parameters; errors name the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ScenarioError> {
         if self.count == 0 {
             return Err("count = 0 must be ≥ 1".into());
         }
         let [d0, d1] = self.diameter;
         if !(d0 > 0.0 && d1 >= d0 && d1.is_finite()) {
-            return Err(format!(
-                "diameter = [{d0}, {d1}] must satisfy 0 < min ≤ max"
-            ));
+            return Err(format!("diameter = [{d0}, {d1}] must satisfy 0 < min ≤ max").into());
         }
         let [v0, v1] = self.vertices;
         if !(4..=200).contains(&v0) || v1 < v0 || v1 > 200 {
-            return Err(format!(
-                "vertices = [{v0}, {v1}] must satisfy 4 ≤ min ≤ max ≤ 200"
-            ));
+            return Err(format!("vertices = [{v0}, {v1}] must satisfy 4 ≤ min ≤ max ≤ 200").into());
         }
         for (name, x) in [("elongation", self.elongation), ("flatness", self.flatness)] {
             if !(x.is_finite() && (1.0..=10.0).contains(&x)) {
-                return Err(format!("{name} = {x} must be in [1, 10]"));
+                return Err(format!("{name} = {x} must be in [1, 10]").into());
             }
         }
         // Before the span: a NaN in min would otherwise be blamed on max_xy.
         if self.min.iter().any(|x| !x.is_finite()) {
-            return Err(format!("min = {:?} must be finite", self.min));
+            return Err(format!("min = {:?} must be finite", self.min).into());
         }
         if self.max_xy.iter().any(|x| !x.is_finite()) {
-            return Err(format!("max_xy = {:?} must be finite", self.max_xy));
+            return Err(format!("max_xy = {:?} must be finite", self.max_xy).into());
         }
         let span = |k: usize| self.max_xy[k] - self.min[k];
         if !(span(0) >= d1 && span(1) >= d1) {
             return Err(format!(
                 "max_xy = {:?} must exceed min by at least the largest diameter {d1} m",
                 self.max_xy
-            ));
+            )
+            .into());
         }
         Ok(())
     }

@@ -78,10 +78,7 @@ use crate::world::{StepSettings, World};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// A scenario error: one message naming the field, the value and what is allowed.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{0}")]
-pub struct ScenarioError(pub String);
+pub use crate::error::ScenarioError;
 
 fn err<T>(msg: impl Into<String>) -> Result<T, ScenarioError> {
     Err(ScenarioError(msg.into()))

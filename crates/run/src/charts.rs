@@ -4,7 +4,7 @@
 //! `NAME.png` (raster, antialiased), from the same layout.
 //!
 //! * Text is set in DejaVu Sans, shipped in `assets/fonts` and rasterised in pure Rust
-//!   (`ab_glyph`, see [`text`]): no system font or library is needed, and the PNG is the same
+//!   (`ab_glyph`, in the `text` module): no system font or library is needed, and the PNG is the same
 //!   on every machine. The SVG names the family `sans-serif`, so a viewer uses its own sans
 //!   font.
 //! * The PNG is drawn at [`SUPERSAMPLE`] times its size and averaged down: plotters' raster
