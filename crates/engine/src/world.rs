@@ -45,12 +45,33 @@ pub struct StepSettings {
     /// anew each step). See [`crate::detection::coherence`].
     #[serde(default = "default_reuse_distance")]
     pub reuse_distance: f64,
+    /// Normal stiffness of a contact point (N/m); `None`: rigid contacts (Moreau-Jean's
+    /// Signorini law). With a stiffness the normal law is the rate form of an elastic contact:
+    /// over a step the normal force changes by `k` times the approach `h uₙ` (see
+    /// [`crate::solver::nlgs`]), so forces in a jammed, hyperstatic packing are those of stiff
+    /// elastic grains instead of any of the rigid law's unbounded set of self-stresses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_stiffness: Option<f64>,
     /// NLGS settings.
     pub solver: SolverSettings,
     /// Overlap post-stabilisation.
     pub correction: CorrectionSettings,
     /// Domain decomposition (Algorithm 1); `None` = monolithic NLGS.
     pub ddm: Option<DdmSettings>,
+}
+
+/// Checks a scenario's `simulation.contact_stiffness` (N/m per contact point): `None` or `inf`
+/// is a rigid contact, anything else must be a number > 0. Returns the value
+/// [`StepSettings::contact_stiffness`] takes.
+pub fn check_contact_stiffness(k: Option<f64>) -> Result<Option<f64>, String> {
+    match k {
+        None => Ok(None),
+        Some(k) if k == f64::INFINITY => Ok(None),
+        Some(k) if k > 0.0 && k.is_finite() => Ok(Some(k)),
+        Some(k) => Err(format!(
+            "simulation.contact_stiffness = {k} must be > 0 N/m (inf: rigid contacts)"
+        )),
+    }
 }
 
 impl Default for StepSettings {
@@ -62,6 +83,7 @@ impl Default for StepSettings {
             alert: 1e-3,
             match_fraction: 0.1,
             reuse_distance: default_reuse_distance(),
+            contact_stiffness: None,
             solver: SolverSettings::default(),
             correction: CorrectionSettings::default(),
             ddm: None,
@@ -248,9 +270,14 @@ impl World {
 
     /// The NLGS solver configured for this world.
     pub fn nlgs(&self) -> Nlgs {
+        let h = self.settings.dt;
         Nlgs {
             settings: self.settings.solver.clone(),
-            h_theta: self.settings.dt * self.settings.theta,
+            h_theta: h * self.settings.theta,
+            compliance: self
+                .settings
+                .contact_stiffness
+                .map_or(0.0, |k| 1.0 / (k * h * h)),
         }
     }
 
@@ -291,10 +318,12 @@ impl World {
     /// assembled from its local problems on the free velocities: a value to export, hand to
     /// another solver, or solve with [`crate::solver::ContactProblem::solve_nlgs`].
     pub fn contact_problem(&self) -> crate::solver::ContactProblem {
+        let nlgs = self.nlgs();
         crate::solver::ContactProblem::assemble(
             &self.locals,
             &self.solver_bodies,
-            self.settings.dt * self.settings.theta,
+            nlgs.h_theta,
+            nlgs.compliance,
         )
     }
 
@@ -334,12 +363,6 @@ impl World {
             &self.previous,
             s.match_fraction,
         );
-        if !s.solver.warm_start {
-            self.contacts
-                .impulse
-                .iter_mut()
-                .for_each(|r| *r = DVec3::ZERO);
-        }
         let max_penetration = self.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g));
         times.detection = lap.lap();
 
@@ -396,8 +419,11 @@ impl World {
         times.other += lap.lap();
 
         // 3. Local problems.
+        // Without warm start the solver starts from zero impulses; the previous ones stay the
+        // compliant law's memory.
         build_local_problems(
             &self.contacts,
+            self.settings.solver.warm_start,
             b,
             &self.solver_bodies,
             &self.attach,

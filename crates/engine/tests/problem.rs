@@ -13,6 +13,11 @@ use ballast_engine::world::{StepSettings, World};
 
 /// A pile of 80 grains poured in a box, 0.8 s later (settling), its next step prepared.
 fn prepared_pile() -> World {
+    prepared_pile_with(None)
+}
+
+/// [`prepared_pile`] with contacts of the given stiffness (N/m; `None`: rigid).
+fn prepared_pile_with(contact_stiffness: Option<f64>) -> World {
     let mut bodies = BodySet::default();
     bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
     for (p, n) in [
@@ -38,6 +43,7 @@ fn prepared_pile() -> World {
     }
     let settings = StepSettings {
         dt: 5e-4,
+        contact_stiffness,
         solver: SolverSettings {
             tolerance: 1e-3,
             max_iterations: 200,
@@ -137,7 +143,15 @@ fn assembled_delassus_matches_the_matrix_free_operator() {
 
 #[test]
 fn nlgs_on_the_assembled_problem_reproduces_the_engine_sweep() {
-    let w = prepared_pile();
+    // Rigid contacts, and compliant ones (the law's `c` and `r̄ₙ` folded into `W` and `q`).
+    for stiffness in [None, Some(1e6)] {
+        assembled_sweep_matches(stiffness);
+    }
+}
+
+fn assembled_sweep_matches(stiffness: Option<f64>) {
+    let w = prepared_pile_with(stiffness);
+    assert_eq!(w.contact_problem().compliance > 0.0, stiffness.is_some());
     let settings = SolverSettings {
         tolerance: 1e-300,
         max_iterations: 40,
@@ -204,7 +218,13 @@ fn detect_then_step_is_one_step() {
 
 #[test]
 fn global_form_gives_w_and_q_through_the_bodies() {
-    let w = prepared_pile();
+    for stiffness in [None, Some(1e6)] {
+        global_form_matches(stiffness);
+    }
+}
+
+fn global_form_matches(stiffness: Option<f64>) {
+    let w = prepared_pile_with(stiffness);
     let p = w.contact_problem();
     let g = w.global_problem(&p);
     let n = p.len();
@@ -219,7 +239,9 @@ fn global_form_gives_w_and_q_through_the_bodies() {
         .filter(|c| !(c.dynamic1 && c.dynamic2))
         .count();
     assert_eq!(g.h.len(), 2 * n - walls);
-    // W = Hᵀ M⁻¹ H.
+    // W = Hᵀ M⁻¹ H + c Iₙ.
+    let c = g.compliance;
+    assert_eq!(c, p.compliance);
     let norm =
         p.w.blocks
             .iter()
@@ -227,7 +249,12 @@ fn global_form_gives_w_and_q_through_the_bodies() {
             .fold(0.0, f64::max);
     let mut rand = noise(3);
     let r: Vec<DVec3> = (0..n).map(|_| DVec3::new(rand(), rand(), rand())).collect();
-    let via_bodies = g.w_times(&r);
+    let via_bodies: Vec<DVec3> = g
+        .w_times(&r)
+        .iter()
+        .zip(&r)
+        .map(|(u, x)| *u + DVec3::new(c * x.x, 0.0, 0.0))
+        .collect();
     let assembled = p.w.mul(&r);
     let r_max = r.iter().map(|x| x.length()).fold(0.0, f64::max);
     for (a, b) in via_bodies.iter().zip(&assembled) {
@@ -236,11 +263,11 @@ fn global_form_gives_w_and_q_through_the_bodies() {
             "Hᵀ M⁻¹ H r = {a} but W r = {b}"
         );
     }
-    // The walls are fixed, so q − Hᵀ v_free is the gap shift alone.
+    // The walls are fixed, so q − Hᵀ v_free is the gap shift alone (less c r̄ₙ).
     let h_theta = w.settings.dt * w.settings.theta;
     let q_max = p.q.iter().map(|x| x.length()).fold(0.0, f64::max);
-    for (c, b) in w.local_problems().iter().zip(&g.b) {
-        let shift = DVec3::new(c.gap.max(0.0) / h_theta, 0.0, 0.0);
+    for (l, b) in w.local_problems().iter().zip(&g.b) {
+        let shift = DVec3::new(l.gap.max(0.0) / h_theta - c * l.r_prev, 0.0, 0.0);
         assert!(
             (*b - shift).length() <= 1e-12 * q_max,
             "b = {b}, gap shift {shift}"

@@ -60,6 +60,10 @@ pub struct TrackSimulation {
     /// Reuse distance (m): a pair's contact geometry is reused until a point of either body
     /// moved this far since it was computed; 0 = every pair detected anew each step.
     pub reuse_distance: f64,
+    /// Normal stiffness of a contact point (N/m) during the cycle; `None` or `inf`: rigid
+    /// contacts (see `ballast_engine::world::StepSettings::contact_stiffness`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contact_stiffness: Option<f64>,
     /// Steps to run; `None` = the whole cycle.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub steps: Option<u64>,
@@ -83,6 +87,7 @@ impl Default for TrackSimulation {
             theta: 0.5,
             alert: DEFAULT_ALERT,
             reuse_distance: ballast_engine::world::default_reuse_distance(),
+            contact_stiffness: None,
             steps: None,
             // Every 20 ms and 0.1 s of the default cycle.
             output_interval: 25,
@@ -428,6 +433,15 @@ impl TrackScenario {
             0.25 * s.alert,
             "m",
         )?;
+        if ballast_engine::world::check_contact_stiffness(s.contact_stiffness).is_err() {
+            let k = s.contact_stiffness.unwrap_or(f64::NAN);
+            return Err(refuse(
+                "simulation.contact_stiffness",
+                k,
+                "> 0 N/m (inf: rigid contacts)",
+            )
+            .into());
+        }
         if s.output_interval == 0 {
             return Err(refuse("simulation.output_interval", 0, "≥ 1 step").into());
         }
@@ -514,6 +528,10 @@ impl TrackScenario {
             theta: self.simulation.theta,
             alert: self.simulation.alert,
             reuse_distance: self.simulation.reuse_distance,
+            contact_stiffness: ballast_engine::world::check_contact_stiffness(
+                self.simulation.contact_stiffness,
+            )
+            .unwrap_or(None),
             solver: self.solver.clone(),
             correction: self.correction.clone(),
             ddm: self.ddm.clone(),

@@ -9,6 +9,7 @@
 //! gravity = [0, 0, -9.81]
 //! alert = 1e-3         # m
 //! reuse_distance = 1e-5 # m: contact geometry reused until a grain moved this far (0 = never)
+//! contact_stiffness = 1e7 # N/m per contact point (absent or inf = rigid contacts)
 //! output_interval = 50 # steps between rows of series.csv
 //! checkpoint_interval = 1000 # steps between checkpoints (0 = only at the end)
 //! vtk_interval = 500   # steps between ParaView frames (0 = none)
@@ -103,6 +104,10 @@ pub struct Simulation {
     /// 0 = every pair detected anew each step (see `StepSettings::reuse_distance`).
     #[serde(default = "crate::world::default_reuse_distance")]
     pub reuse_distance: f64,
+    /// Normal stiffness of a contact point (N/m); absent or `inf`: rigid contacts (see
+    /// `StepSettings::contact_stiffness`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub contact_stiffness: Option<f64>,
     #[serde(default = "default_interval")]
     pub output_interval: u64,
     /// Steps between checkpoints (one is also written at the end of a run); 0 = only at the end.
@@ -534,6 +539,7 @@ impl Scenario {
                 0.25 * s.alert
             ));
         }
+        crate::world::check_contact_stiffness(s.contact_stiffness).map_err(ScenarioError)?;
         if s.output_interval == 0 {
             return err("simulation.output_interval = 0 must be ≥ 1 step");
         }
@@ -858,6 +864,8 @@ impl Scenario {
             gravity: vec3(s.gravity),
             alert: s.alert,
             reuse_distance: s.reuse_distance,
+            contact_stiffness: crate::world::check_contact_stiffness(s.contact_stiffness)
+                .unwrap_or(None),
             solver: self.solver.clone(),
             correction: self.correction.clone(),
             ddm: self.ddm.clone(),

@@ -39,6 +39,7 @@ pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenari
             gravity: [0.0, 0.0, -9.81],
             alert: 1e-3,
             reuse_distance: crate::world::default_reuse_distance(),
+            contact_stiffness: None,
             output_interval: 50,
             checkpoint_interval: 1000,
             vtk_interval: 500,

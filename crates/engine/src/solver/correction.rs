@@ -222,6 +222,7 @@ mod tests {
                 gap,
                 mu: 0.0,
                 r: DVec3::ZERO,
+                r_prev: 0.0,
             }
         };
         let locals = vec![contact(0, 1, -5e-3), contact(1, 2, 1e-4)];

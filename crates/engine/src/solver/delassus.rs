@@ -1,7 +1,7 @@
 //! Local problems: for each contact, its frame and lever arms (which define the rows `H_αᵀ`)
 //! and the diagonal Delassus block `W_αα = H_αᵀ M⁻¹ H_α`.
 //!
-//! Only what cannot be recomputed cheaply is stored (200 bytes per contact: `W` as a symmetric
+//! Only what cannot be recomputed cheaply is stored (208 bytes per contact: `W` as a symmetric
 //! matrix, its inverse computed when needed; the frame as `[n, t]`): the sweep is memory-bound at large scale, so `r × e_k` and `I⁻¹ (r × P)` are recomputed from the lever arms and the
 //! body's inverse inertia, which stays in cache across that body's contacts.
 
@@ -42,6 +42,9 @@ pub struct LocalProblem {
     pub mu: f64,
     /// Current impulse `(r_n, r_t, r_s)`.
     pub r: DVec3,
+    /// Normal impulse the contact carried at the end of the previous step (0 for a new
+    /// contact): the memory of the compliant normal law (see [`super::nlgs`]).
+    pub r_prev: f64,
 }
 
 /// Access to the solver bodies a sweep works on: the whole array (monolithic NLGS), or the
@@ -127,12 +130,14 @@ pub fn delassus_block(
     basis.transpose() * world * basis
 }
 
-/// Builds the local problem of every contact (in parallel; the order is the contacts' order).
-/// `attach[i]` is the body whose velocities body `i` takes (itself, or the body it is a rigid
-/// part of; empty: every body is itself): a contact on an attached part acts on that body,
-/// with the lever arm from its centre of mass.
+/// Builds the local problem of every contact (in parallel; the order is the contacts' order),
+/// starting from the contacts' impulses with `warm_start`, else from zero. `attach[i]` is the
+/// body whose velocities body `i` takes (itself, or the body it is a rigid part of; empty:
+/// every body is itself): a contact on an attached part acts on that body, with the lever arm
+/// from its centre of mass.
 pub fn build_local_problems(
     contacts: &ContactSet,
+    warm_start: bool,
     bodies: &BodySet,
     solver_bodies: &[SolverBody],
     attach: &[u32],
@@ -171,7 +176,12 @@ pub fn build_local_problems(
                 w,
                 gap: contacts.gap[k],
                 mu: contacts.mu[k],
-                r: contacts.impulse[k],
+                r: if warm_start {
+                    contacts.impulse[k]
+                } else {
+                    DVec3::ZERO
+                },
+                r_prev: contacts.impulse[k].x,
             }
         })
         .collect_into_vec(out);
@@ -182,9 +192,10 @@ mod tests {
     use super::*;
 
     /// The sweep streams the local problems from memory at large scale: their size is a
-    /// budget (320 bytes with `W` and `W⁻¹` as full matrices and the frame's three vectors).
+    /// budget (320 bytes with `W` and `W⁻¹` as full matrices and the frame's three vectors;
+    /// 8 of the 208 are the compliant law's memory).
     #[test]
     fn local_problem_size() {
-        assert_eq!(std::mem::size_of::<LocalProblem>(), 200);
+        assert_eq!(std::mem::size_of::<LocalProblem>(), 208);
     }
 }
