@@ -1,5 +1,5 @@
 """A tamping study from Python: the vibration frequency of the tines against the compacity
-gained under the block, on a small bed (about 270 grains; a few minutes on 2 cores).
+gained under the block, on a small bed (about 750 grains; a few minutes on 2 cores).
 
     pip install . matplotlib
     python3 examples/python/frequency_study.py [--out frequency_study.png]
@@ -63,6 +63,11 @@ def main():
                     (r["frequency"], r["gain"]), textcoords="offset points", xytext=(0, 8),
                     ha="center", fontsize=7, color="0.35")
     ax.axhline(0.0, color="0.6", lw=0.8)
+    # Room above the highest point for its annotation.
+    gains = [r["gain"] for r in rows]
+    top = max(gains + [0.0])
+    ax.set_ylim(min(gains + [0.0]) - 0.1 * abs(top) - 1.0, top + 0.3 * abs(top) + 1.0)
+    ax.margins(x=0.15)
     ax.set_xlabel("vibration frequency of the tines (Hz)")
     ax.set_ylabel("compacity gained under the block (%)")
     ax.set_title("Tamping one block: effect of the vibration frequency")
