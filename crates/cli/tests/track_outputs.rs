@@ -93,7 +93,7 @@ const D_LOWER: f64 = 0.0315;
 const BED_OVERLAP: f64 = 2e-3;
 
 /// Columns the track model adds for one block and 4 tines, in order.
-const TRACK_COLUMNS: [&str; 37] = [
+const TRACK_COLUMNS: [&str; 41] = [
     "compacity_under_block_1",
     "compacity_crib_0",
     "compacity_crib_1",
@@ -131,6 +131,10 @@ const TRACK_COLUMNS: [&str; 37] = [
     "tine_travel_4_z_m",
     "tine_travel_4_z_command_m",
     "coordination",
+    "tine_work_1_J",
+    "tine_work_2_J",
+    "tine_work_3_J",
+    "tine_work_4_J",
 ];
 
 /// The runs shared by the tests.
@@ -628,6 +632,29 @@ fn check_series(r: &Runs, dir: &Path) {
             up / rows
         );
     }
+    // The work the unit reports is its drive force times the tine's travel, step by step
+    // (rows are steps here; the tines neither move across the track nor turn).
+    for j in 1..=4 {
+        let work = s.values(&format!("tine_work_{j}_J"));
+        let (fx, fz) = (
+            s.values(&format!("tine_drive_{j}_x_N")),
+            s.values(&format!("tine_drive_{j}_z_N")),
+        );
+        let (x, z) = (
+            s.values(&format!("tine_travel_{j}_x_m")),
+            s.values(&format!("tine_travel_{j}_z_m")),
+        );
+        let scale = work.iter().map(|w| w.abs()).fold(1.0, f64::max);
+        for k in 1..n {
+            let step = fx[k] * (x[k] - x[k - 1]) + fz[k] * (z[k] - z[k - 1]);
+            assert!(
+                (work[k] - work[k - 1] - step).abs() <= 1e-6 * scale,
+                "tine {j}, row {k}: work grew by {} J, force × travel {step} J",
+                work[k] - work[k - 1]
+            );
+        }
+        eprintln!("tine {j}: work of the unit {:.1} J", work[n - 1]);
+    }
     // The tamping unit's forces stay within its limits at every step; a tine below its limits
     // is where its program puts it, one that met more resistance lags behind (never ahead).
     let limits = [sc.tamping.squeeze_force, sc.tamping.insertion_force];
@@ -747,6 +774,7 @@ fn track_report_plots_the_indicators() {
             ("tines", &[x, "tine 1 x", "tine 4 z"]),
             ("blocks", &[x, "block height z (mm)"]),
             ("coordination", &[x, "contacts per grain (-)"]),
+            ("tine_work", &[x, "work (J)", "tine 1"]),
             (
                 "solver",
                 &[x, "contacts (-)", "iterations (-)", "residual (-)"],

@@ -143,6 +143,10 @@ pub struct World {
     ddm_workspace: ddm::DdmWorkspace,
     /// The force-limited drives of the last step (their impulses are the machine's forces).
     drives: Vec<DriveRows>,
+    /// Work done by each force-limited drive since t = 0 (J), by driven body, in body order:
+    /// `Σ λ · v̄` over the steps, with `v̄ = θ v⁺ + (1 − θ) v⁻` the velocity the update moves
+    /// the body with (translation and rotation).
+    pub(crate) drive_work: Vec<(u32, f64)>,
     /// Per body, the body whose velocities it takes in the solver (itself, or the body it is
     /// attached to); empty when no body is attached.
     attach: Vec<u32>,
@@ -181,6 +185,7 @@ impl World {
             pseudo: Vec::new(),
             ddm_workspace: ddm::DdmWorkspace::default(),
             drives: Vec::new(),
+            drive_work: Vec::new(),
             attach: Vec::new(),
             pending: None,
         }
@@ -243,6 +248,15 @@ impl World {
     /// each drive exerted on its body (N), `impulse_w / dt` the torque.
     pub fn drives(&self) -> &[DriveRows] {
         &self.drives
+    }
+
+    /// The work (J) the drive of body `i` has done on it since t = 0: its force times the
+    /// distance it moved, step by step (translation and rotation; 0 for a body that never had
+    /// a force-limited drive). Negative when the body was pushed back against its drive.
+    pub fn drive_work(&self, i: usize) -> f64 {
+        self.drive_work
+            .binary_search_by_key(&(i as u32), |&(b, _)| b)
+            .map_or(0.0, |k| self.drive_work[k].1)
     }
 
     /// The partition of this step: boxes over the dynamic bodies' centres, weighted by
@@ -511,6 +525,18 @@ impl World {
                 let sb = &mut self.solver_bodies[i];
                 sb.v = parent.v + parent.w.cross(arm);
                 sb.w = parent.w;
+            }
+        }
+        // The drives' work over the step, at the velocities the update below moves with.
+        for d in &self.drives {
+            let i = d.body as usize;
+            let sb = &self.solver_bodies[i];
+            let vbar = sb.v * theta + self.bodies.velocity[i] * (1.0 - theta);
+            let wbar = sb.w * theta + self.bodies.angular_velocity[i] * (1.0 - theta);
+            let work = d.impulse_v.dot(vbar) + d.impulse_w.dot(wbar);
+            match self.drive_work.binary_search_by_key(&d.body, |&(b, _)| b) {
+                Ok(k) => self.drive_work[k].1 += work,
+                Err(k) => self.drive_work.insert(k, (d.body, work)),
             }
         }
         times.nlgs += lap.lap();

@@ -642,6 +642,8 @@ fn checkpoints_cover_all_state_fields() {
             "timers",
             // the digest of the run's initial state
             "origin",
+            // the work each drive has done so far
+            "drive_work",
             // its anchor poses (the rest of it is rebuilt every step)
             "detector",
             // from the scenario
@@ -699,28 +701,32 @@ fn checkpoints_cover_all_state_fields() {
     );
 }
 
-/// Version 1 and 2 files (written before the detection's anchor poses, resp. the run's
-/// origin, were stored) still read: a version 1 run resumes with every body anchored anew at
-/// its first step, and neither is checked against the initial state. The same bytes labelled
-/// an older version with the newer sections left in are refused as malformed, not misread.
+/// Version 1, 2 and 3 files (written before the detection's anchor poses, the run's origin,
+/// resp. the drives' work were stored) still read: a version 1 run resumes with every body
+/// anchored anew at its first step, versions 1 and 2 are not checked against the initial
+/// state, and the drives start from no work done. The same bytes labelled an older version
+/// with the newer sections left in are refused as malformed, not misread.
 #[test]
-fn version_1_and_2_files_still_read() {
+fn older_version_files_still_read() {
     let s = scenario();
     let mut w = build(&s);
     run(&mut w, SPLIT, &mut RunStats::default());
-    let v3 = encode_checkpoint(&w, None);
+    let v4 = encode_checkpoint(&w, None);
     // Payload tail: anchor flag 1, n positions (24 bytes), n orientations (32 bytes), origin
-    // flag 1 and its u64, then the statistics flag 0; then the checksum.
+    // flag 1 and its u64, the drive count 0 (this scene has no drive), then the statistics
+    // flag 0; then the checksum.
     let anchors = 1 + 56 * w.bodies.len();
     let origin = 1 + 8;
-    let end = v3.len() - 8;
+    let work = 8;
+    let end = v4.len() - 8;
     assert_eq!(
         (
-            v3[end - 1 - origin - anchors],
-            v3[end - 1 - origin],
-            v3[end - 1]
+            v4[end - 1 - work - origin - anchors],
+            v4[end - 1 - work - origin],
+            &v4[end - 1 - work..end - 1],
+            v4[end - 1]
         ),
-        (1, 1, 0)
+        (1, 1, &[0u8; 8][..], 0)
     );
     let relabel = |mut b: Vec<u8>, version: u32| {
         b[11..15].copy_from_slice(&version.to_le_bytes());
@@ -730,12 +736,17 @@ fn version_1_and_2_files_still_read() {
         reseal(&mut b);
         b
     };
-    let mut v2 = v3[..end - 1 - origin].to_vec();
-    v2.push(0);
-    let mut v1 = v3[..end - 1 - origin - anchors].to_vec();
-    v1.push(0);
+    let older = |cut: usize| {
+        let mut b = v4[..end - 1 - cut].to_vec();
+        b.push(0);
+        b
+    };
     let dir = tmp("version1");
-    for (version, bytes) in [(1, v1), (2, v2)] {
+    for (version, bytes) in [
+        (1, older(work + origin + anchors)),
+        (2, older(work + origin)),
+        (3, older(work)),
+    ] {
         let path = dir.join(format!("v{version}.bin"));
         write_bytes(&path, &relabel(bytes, version));
         let mut resumed = build(&s);
@@ -743,7 +754,11 @@ fn version_1_and_2_files_still_read() {
         assert_eq!(state_digest(&resumed.bodies), state_digest(&w.bodies));
         assert_eq!(resumed.step_index, w.step_index);
         // No origin in the file: unknown, not made up.
-        assert_eq!(resumed.origin_digest(), None);
+        if version < 3 {
+            assert_eq!(resumed.origin_digest(), None);
+        } else {
+            assert_eq!(resumed.origin_digest(), w.origin_digest());
+        }
         resumed.step();
         assert!(
             resumed.contacts.len() > 5,
@@ -752,15 +767,15 @@ fn version_1_and_2_files_still_read() {
         );
     }
 
-    for version in [1, 2] {
+    for version in [1, 2, 3] {
         let e = read_damaged(
             &dir,
             &format!("mislabelled{version}.bin"),
-            &relabel(v3[..end].to_vec(), version),
+            &relabel(v4[..end].to_vec(), version),
         );
         assert!(
             matches!(e, CheckpointError::Corrupted { .. }),
-            "a version 3 payload read as version {version}: {e:?}"
+            "a version 4 payload read as version {version}: {e:?}"
         );
     }
 }

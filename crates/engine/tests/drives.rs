@@ -160,6 +160,45 @@ fn pusher_follows_below_its_limit_and_stalls_at_it() {
     }
 }
 
+/// The work a drive reports is the energy it put in: pushing the block along the floor, the
+/// pusher's work equals the kinetic energy of the block and of the pusher's own mass plus the
+/// friction work `μ m g Δx` (to the solver's tolerance: the discrete balance is exact for
+/// θ = 0.5); a pusher stalled against a block it cannot move does no work.
+#[test]
+fn drive_work_is_kinetic_energy_plus_friction_work() {
+    for attached in [false, true] {
+        let (speed, mu) = (0.05, 0.5);
+        let (mut w, block, pusher) = pusher_world(speed, 100.0, attached);
+        let m = w.bodies.mass(block);
+        let bx0 = w.bodies.position[block].x;
+        assert_eq!(w.drive_work(pusher), 0.0);
+        for _ in 0..300 {
+            w.step();
+        }
+        let kinetic = |i: usize| 0.5 * w.bodies.velocity[i].length_squared() / w.bodies.inv_mass[i];
+        let balance =
+            kinetic(block) + kinetic(pusher) + mu * m * G * (w.bodies.position[block].x - bx0);
+        let work = w.drive_work(pusher);
+        assert!(
+            (work - balance).abs() <= 1e-6 * balance,
+            "attached {attached}: drive work {work} J, kinetic energy + friction work {balance} J"
+        );
+        assert_eq!(w.drive_work(block), 0.0, "the block has no drive");
+
+        let (mut w, _, pusher) = pusher_world(speed, 0.9 * mu * m * G, attached);
+        for _ in 0..300 {
+            w.step();
+        }
+        // Only the ramp before the block pressed back moved the pusher: work of the order of
+        // the limit times a few micrometres.
+        let stalled = w.drive_work(pusher);
+        assert!(
+            stalled.abs() < 1e-3 * balance,
+            "attached {attached}: a stalled pusher did {stalled} J"
+        );
+    }
+}
+
 trait ReportOk {
     fn report_ok(&self) -> bool;
 }

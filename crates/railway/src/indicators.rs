@@ -15,7 +15,11 @@
 //!   `tine_travel_J_x_command_m`, `tine_travel_J_z_command_m` the displacement its program
 //!   commanded (vibration included): a tine that met more resistance than its limit lags;
 //! * `coordination`: mean number of grain–grain contacts per grain (pairs carrying a
-//!   compressive normal impulse, counted once however many contact points they have).
+//!   compressive normal impulse, counted once however many contact points they have);
+//! * `tine_work_J_J`: work (J) the tamping unit's cylinders have done on tine J since the
+//!   start, its drive force times the distance the tine moved, step by step
+//!   ([`World::drive_work`]; the vibration, imposed on top, is not counted). Negative while
+//!   the ballast pushes the tine back against its cylinder.
 
 use crate::compacity::solid_volume;
 use crate::scene::Layout;
@@ -93,6 +97,9 @@ impl Indicators {
             }
         }
         names.push("coordination".into());
+        for j in 1..=layout.tines.len() {
+            names.push(format!("tine_work_{j}_J"));
+        }
         Indicators {
             names,
             volumes,
@@ -145,6 +152,7 @@ impl Indicators {
             out.extend([moved.x, commanded.x, moved.z, commanded.z]);
         }
         out.push(self.coordination(world));
+        out.extend(self.tines.iter().map(|[blade, _]| world.drive_work(*blade)));
         out
     }
 

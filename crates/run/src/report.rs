@@ -95,7 +95,7 @@ struct Family {
     default_unit: &'static str,
 }
 
-const FAMILIES: [Family; 6] = [
+const FAMILIES: [Family; 7] = [
     Family {
         prefix: "compacity_",
         file: "compacity",
@@ -143,6 +143,14 @@ const FAMILIES: [Family; 6] = [
         quantity: "displacement",
         noun: "tine",
         default_unit: "m",
+    },
+    Family {
+        prefix: "tine_work_",
+        file: "tine_work",
+        title: "Work of the tamping unit on the tines",
+        quantity: "work",
+        noun: "tine",
+        default_unit: "J",
     },
 ];
 

@@ -20,7 +20,7 @@
 //!
 //! Every `f64` is stored as its exact IEEE-754 bits: a resumed run continues bit-identically.
 //!
-//! # File format, version 3 (versions 1 and 2 still read)
+//! # File format, version 4 (versions 1 to 3 still read)
 //!
 //! All integers little-endian; `f64` as the little-endian bytes of [`f64::to_bits`]; a vector is
 //! `x, y, z`; a quaternion is `x, y, z, w`. An "array" is a `u64` element count followed by the
@@ -51,6 +51,7 @@
 //! | *contacts*           | `u64` count `m`, then field by field (`m` values each): body 1 `u32`, body 2 `u32`, point, frame (`n, t, s`: 3 vectors), gap `f64`, μ `f64`, impulse, status `u8` (0 no contact, 1 stick, 2 slide), local point |
 //! | *anchors*            | `u8` 0 (absent) or 1 then the `n` anchor positions, then the `n` anchor orientations (version ≥ 2; a version 1 file has no such field) |
 //! | *origin*             | `u8` 0 (absent) or 1 then `u64`, the [`crate::world::initial_state_digest`] of the state the run started from (version ≥ 3; older files have no such field and are not checked) |
+//! | *drive work*         | array of (driven body `u32`, `f64` work in J): [`World::drive_work`] (version ≥ 4; older files read as no work done) |
 //! | *run statistics*     | `u8` 0 (absent) or 1 then steps `u64`, contacts sum `u64`, contacts max `u64`, iterations sum `u64`, max residual `f64`, steps not converged `u64`, max penetration `f64` |
 //!
 //! The shape hash is [`fnv1a64`] over the shape kind and its exact geometry (vertices, faces,
@@ -93,7 +94,7 @@ use std::path::{Path, PathBuf};
 /// The magic bytes every checkpoint starts with.
 pub const MAGIC: &[u8; 11] = b"BALLASTCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// The oldest format version this build still reads (version 1 has no anchor poses: a run
 /// resumed from it detects every pair anew at its first step).
 pub const OLDEST_VERSION: u32 = 1;
@@ -675,6 +676,12 @@ pub fn encode_checkpoint(world: &World, stats: Option<&RunStats>) -> Vec<u8> {
         None => p.u8(0),
     }
 
+    p.len(world.drive_work.len());
+    for &(body, work) in &world.drive_work {
+        p.u32(body);
+        p.f64(work);
+    }
+
     match stats {
         None => p.u8(0),
         Some(s) => {
@@ -749,6 +756,8 @@ struct Decoded {
     anchors: Option<(Vec<DVec3>, Vec<DQuat>)>,
     /// Digest of the run's initial state (version ≥ 3).
     origin: Option<u64>,
+    /// Work done by each drive (version ≥ 4).
+    drive_work: Vec<(u32, f64)>,
     stats: Option<RunStats>,
 }
 
@@ -858,6 +867,13 @@ fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
             f => return Err(format!("origin flag {f} is not 0 or 1")),
         },
     };
+    let drive_work = match version {
+        1..=3 => Vec::new(),
+        _ => {
+            let k = d.count(12, "drive count")?;
+            d.vec(k, |d| Ok((d.u32("driven body")?, d.f64("drive work")?)))?
+        }
+    };
 
     let stats = match d.u8("statistics flag")? {
         0 => None,
@@ -887,6 +903,7 @@ fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
         contacts: c,
         anchors,
         origin,
+        drive_work,
         stats,
     })
 }
@@ -1018,6 +1035,7 @@ fn apply(d: Decoded, path: &Path, world: &mut World) -> Result<Option<RunStats>,
     world.step_index = d.step_index;
     // A checkpoint without an origin leaves the run's origin unknown rather than wrong.
     world.origin = d.origin;
+    world.drive_work = d.drive_work;
     // Released bodies follow the checkpoint's clock, whichever world reads it.
     for i in 0..world.bodies.len() {
         world.bodies.kind[i] = world.bodies.scene_kind(i);
