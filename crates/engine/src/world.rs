@@ -134,19 +134,32 @@ pub struct World {
     /// never resumed under a scenario with another initial state.
     pub(crate) origin: Option<u64>,
     pub(crate) detector: Detector,
+    /// Work done by each force-limited drive since t = 0 (J), by driven body, in body order:
+    /// `Σ λ · v̄` over the steps, with `v̄ = θ v⁺ + (1 − θ) v⁻` the velocity the update moves
+    /// the body with (translation and rotation).
+    pub(crate) drive_work: Vec<(u32, f64)>,
+    /// The force-limited drives of the last step: rebuilt by every step, kept as its result
+    /// (their impulses are the machine's forces).
+    drives: Vec<DriveRows>,
+    /// The step pipeline's buffers: nothing in them carries over from one step to the next
+    /// (see [`World::release_scratch`]).
+    scratch: Scratch,
+}
+
+/// The buffers a step works in, kept between steps only to reuse their allocations (Rapier's
+/// split of state and pipeline): a step rebuilds every one of them from the [`World`]'s state
+/// before reading it, so dropping them changes no result.
+#[derive(Debug, Default)]
+struct Scratch {
     raw: Vec<RawContact>,
+    /// Where the contacts of the step before go while the new ones are built (the warm start
+    /// reads them).
     previous: ContactSet,
     locals: Vec<LocalProblem>,
     solver_bodies: Vec<SolverBody>,
     free_w: Vec<DVec3>,
     pseudo: Vec<SolverBody>,
     ddm_workspace: ddm::DdmWorkspace,
-    /// The force-limited drives of the last step (their impulses are the machine's forces).
-    drives: Vec<DriveRows>,
-    /// Work done by each force-limited drive since t = 0 (J), by driven body, in body order:
-    /// `Σ λ · v̄` over the steps, with `v̄ = θ v⁺ + (1 − θ) v⁻` the velocity the update moves
-    /// the body with (translation and rotation).
-    pub(crate) drive_work: Vec<(u32, f64)>,
     /// Per body, the body whose velocities it takes in the solver (itself, or the body it is
     /// attached to); empty when no body is attached.
     attach: Vec<u32>,
@@ -177,17 +190,9 @@ impl World {
             group_names: Vec::new(),
             origin: None,
             detector: Detector::default(),
-            raw: Vec::new(),
-            previous: ContactSet::default(),
-            locals: Vec::new(),
-            solver_bodies: Vec::new(),
-            free_w: Vec::new(),
-            pseudo: Vec::new(),
-            ddm_workspace: ddm::DdmWorkspace::default(),
-            drives: Vec::new(),
             drive_work: Vec::new(),
-            attach: Vec::new(),
-            pending: None,
+            drives: Vec::new(),
+            scratch: Scratch::default(),
         }
         .with_attached_velocities()
     }
@@ -195,8 +200,8 @@ impl World {
     /// Attached bodies start with the velocity of the body they are part of.
     fn with_attached_velocities(mut self) -> Self {
         self.refresh_attach();
-        for i in 0..self.attach.len() {
-            let p = self.attach[i] as usize;
+        for i in 0..self.scratch.attach.len() {
+            let p = self.scratch.attach[i] as usize;
             if p != i {
                 let b = &mut self.bodies;
                 let arm = b.position[i] - b.position[p];
@@ -211,15 +216,15 @@ impl World {
     /// scenario files refuse it).
     fn refresh_attach(&mut self) {
         let b = &self.bodies;
-        self.attach.clear();
+        self.scratch.attach.clear();
         if b.driver.iter().flatten().any(|d| d.attached_to.is_some()) {
             let n = b.len();
-            self.attach.extend((0..n).map(
-                |i| match b.driver[i].as_ref().and_then(|d| d.attached_to) {
+            self.scratch.attach.extend((0..n).map(|i| {
+                match b.driver[i].as_ref().and_then(|d| d.attached_to) {
                     Some(p) if p < n && p != i && b.kind[i] == BodyKind::Kinematic => p as u32,
                     _ => i as u32,
-                },
-            ));
+                }
+            }));
         }
     }
 
@@ -303,12 +308,12 @@ impl World {
 
     /// The local problems of the step being prepared (after [`World::prepare`]).
     pub fn local_problems(&self) -> &[LocalProblem] {
-        &self.locals
+        &self.scratch.locals
     }
 
     /// The solver bodies (free velocities after [`World::prepare`]).
     pub fn solver_bodies(&self) -> &[SolverBody] {
-        &self.solver_bodies
+        &self.scratch.solver_bodies
     }
 
     /// The first phase of a step on its own (LMGC90's ChiPy style): detection at `qᵢ` with
@@ -317,15 +322,28 @@ impl World {
     /// contacts ([`World::local_problems`], [`World::contact_problem`]) can be read. Calling it
     /// again before the step does nothing. Returns the largest overlap (m).
     pub fn detect(&mut self) -> f64 {
-        if self.pending.is_none() {
-            self.pending = Some(self.prepare());
+        if self.scratch.pending.is_none() {
+            self.scratch.pending = Some(self.prepare());
         }
-        self.pending.map_or(0.0, |p| p.0)
+        self.scratch.pending.map_or(0.0, |p| p.0)
     }
 
     /// Whether [`World::detect`] has prepared the next step.
     pub fn is_detected(&self) -> bool {
-        self.pending.is_some()
+        self.scratch.pending.is_some()
+    }
+
+    /// Frees the step pipeline's buffers (local problems, solver bodies, detection output,
+    /// domain-decomposition workspace: about 0.5 kB per contact point), as Rapier's pipeline
+    /// can be dropped: the next step rebuilds them from the state, with the same result bit
+    /// for bit. Between [`World::detect`] and the step it prepared they hold that step, so
+    /// nothing is freed then; returns whether they were.
+    pub fn release_scratch(&mut self) -> bool {
+        if self.scratch.pending.is_some() {
+            return false;
+        }
+        self.scratch = Scratch::default();
+        true
     }
 
     /// The contact problem `(W, q, μ)` of the step being prepared (after [`World::prepare`]),
@@ -334,8 +352,8 @@ impl World {
     pub fn contact_problem(&self) -> crate::solver::ContactProblem {
         let nlgs = self.nlgs();
         crate::solver::ContactProblem::assemble(
-            &self.locals,
-            &self.solver_bodies,
+            &self.scratch.locals,
+            &self.scratch.solver_bodies,
             nlgs.h_theta,
             nlgs.compliance,
         )
@@ -347,7 +365,11 @@ impl World {
         &self,
         problem: &crate::solver::ContactProblem,
     ) -> crate::solver::GlobalProblem {
-        crate::solver::GlobalProblem::assemble(&self.locals, &self.solver_bodies, problem)
+        crate::solver::GlobalProblem::assemble(
+            &self.scratch.locals,
+            &self.scratch.solver_bodies,
+            problem,
+        )
     }
 
     /// Steps 1–3 up to the local problems: detection at `qᵢ` with warm start, free velocities,
@@ -367,14 +389,19 @@ impl World {
         self.bodies.apply_releases(self.time);
 
         // 1. Detection at qᵢ and warm start.
-        std::mem::swap(&mut self.previous, &mut self.contacts);
-        self.detector
-            .detect(&self.bodies, s.alert, s.dt, s.reuse_distance, &mut self.raw);
+        std::mem::swap(&mut self.scratch.previous, &mut self.contacts);
+        self.detector.detect(
+            &self.bodies,
+            s.alert,
+            s.dt,
+            s.reuse_distance,
+            &mut self.scratch.raw,
+        );
         self.contacts.rebuild(
-            &self.raw,
+            &self.scratch.raw,
             &self.bodies,
             &self.friction,
-            &self.previous,
+            &self.scratch.previous,
             s.match_fraction,
         );
         let max_penetration = self.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g));
@@ -410,7 +437,7 @@ impl World {
                     inv_inertia: b.inv_inertia_world(i),
                 }
             })
-            .collect_into_vec(&mut self.solver_bodies);
+            .collect_into_vec(&mut self.scratch.solver_bodies);
         self.drives.clear();
         for i in 0..b.len() {
             if let Some(d) = force_limited(b, i) {
@@ -428,8 +455,10 @@ impl World {
                 });
             }
         }
-        self.free_w.clear();
-        self.free_w.extend(self.solver_bodies.iter().map(|sb| sb.w));
+        self.scratch.free_w.clear();
+        self.scratch
+            .free_w
+            .extend(self.scratch.solver_bodies.iter().map(|sb| sb.w));
         times.other += lap.lap();
 
         // 3. Local problems.
@@ -439,9 +468,9 @@ impl World {
             &self.contacts,
             self.settings.solver.warm_start,
             b,
-            &self.solver_bodies,
-            &self.attach,
-            &mut self.locals,
+            &self.scratch.solver_bodies,
+            &self.scratch.attach,
+            &mut self.scratch.locals,
         );
         times.nlgs += lap.lap();
         (max_penetration, times)
@@ -449,7 +478,7 @@ impl World {
 
     /// Advances one time step.
     pub fn step(&mut self) -> StepReport {
-        let (max_penetration, mut times) = match self.pending.take() {
+        let (max_penetration, mut times) = match self.scratch.pending.take() {
             Some(p) => p,
             None => self.prepare(),
         };
@@ -469,35 +498,35 @@ impl World {
         let (solve, corrected) = match &s.ddm {
             None => {
                 let report = nlgs.solve_with_drives(
-                    &mut self.locals,
+                    &mut self.scratch.locals,
                     &mut self.drives,
-                    &mut self.solver_bodies,
+                    &mut self.scratch.solver_bodies,
                     &mut self.contacts.status,
                 );
                 let corrected = pseudo_velocities(
                     &s.correction,
                     h,
-                    &self.locals,
-                    &self.solver_bodies,
-                    &mut self.pseudo,
+                    &self.scratch.locals,
+                    &self.scratch.solver_bodies,
+                    &mut self.scratch.pseudo,
                 );
                 (report, corrected)
             }
             Some(d) => {
                 let partition = self.partition(d);
                 let (report, t, corrected) = ddm::solve_and_correct(
-                    &mut self.ddm_workspace,
+                    &mut self.scratch.ddm_workspace,
                     &nlgs,
                     d,
                     &partition,
-                    &mut self.locals,
+                    &mut self.scratch.locals,
                     &mut self.drives,
-                    &mut self.solver_bodies,
+                    &mut self.scratch.solver_bodies,
                     &mut self.contacts.status,
                     Some(ddm::CorrectionPass {
                         settings: &s.correction,
                         h,
-                        pseudo: &mut self.pseudo,
+                        pseudo: &mut self.scratch.pseudo,
                     }),
                 );
                 times.subdomains = t.subdomains;
@@ -505,24 +534,24 @@ impl World {
                 (report, corrected)
             }
         };
-        for (r, c) in self.contacts.impulse.iter_mut().zip(&self.locals) {
+        for (r, c) in self.contacts.impulse.iter_mut().zip(&self.scratch.locals) {
             *r = c.r;
         }
         // A driven body moves as its drive says: the position-only overlap correction pushes
         // the grains off it, not it off the grains.
         if corrected {
             for d in &self.drives {
-                self.pseudo[d.body as usize] =
-                    correction::at_rest(&self.pseudo[d.body as usize], false);
+                self.scratch.pseudo[d.body as usize] =
+                    correction::at_rest(&self.scratch.pseudo[d.body as usize], false);
             }
         }
         // Attached bodies move with the body they are part of.
-        for (i, &p) in self.attach.iter().enumerate() {
+        for (i, &p) in self.scratch.attach.iter().enumerate() {
             let p = p as usize;
             if p != i {
                 let arm = self.bodies.position[i] - self.bodies.position[p];
-                let parent = self.solver_bodies[p];
-                let sb = &mut self.solver_bodies[i];
+                let parent = self.scratch.solver_bodies[p];
+                let sb = &mut self.scratch.solver_bodies[i];
                 sb.v = parent.v + parent.w.cross(arm);
                 sb.w = parent.w;
             }
@@ -530,7 +559,7 @@ impl World {
         // The drives' work over the step, at the velocities the update below moves with.
         for d in &self.drives {
             let i = d.body as usize;
-            let sb = &self.solver_bodies[i];
+            let sb = &self.scratch.solver_bodies[i];
             let vbar = sb.v * theta + self.bodies.velocity[i] * (1.0 - theta);
             let wbar = sb.w * theta + self.bodies.angular_velocity[i] * (1.0 - theta);
             let work = d.impulse_v.dot(vbar) + d.impulse_w.dot(wbar);
@@ -540,12 +569,12 @@ impl World {
             }
         }
         times.nlgs += lap.lap();
-        let free_w = &self.free_w;
+        let free_w = &self.scratch.free_w;
 
         // 4. Update, in parallel over bodies (each body's update reads only its own data).
         let b = &mut self.bodies;
         let (kind, inertia) = (&b.kind, &b.inertia);
-        let (sbs, pseudo) = (&self.solver_bodies, &self.pseudo);
+        let (sbs, pseudo) = (&self.scratch.solver_bodies, &self.scratch.pseudo);
         (
             b.position.par_iter_mut(),
             b.orientation.par_iter_mut(),
