@@ -3,6 +3,8 @@
 //! rigid setting is the rigid law bit for bit; runs stay deterministic and resume exactly; in
 //! a jammed pile the sweeps stop far sooner than with rigid contacts.
 
+mod common;
+
 use ballast_engine::bodies::{BodyKind, BodySet};
 use ballast_engine::digest::state_digest;
 use ballast_engine::laws::FrictionTable;
@@ -89,16 +91,7 @@ fn rigid_contacts_do_not_sink() {
 
 /// 150 grains poured into a 0.2 m box (1.2 s of settling at dt = 4e-4).
 fn pile(stiffness: Option<f64>, ddm: Option<DdmSettings>) -> World {
-    let mut bodies = BodySet::default();
-    bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
-    for (p, n) in [
-        (DVec3::ZERO, DVec3::X),
-        (DVec3::new(0.2, 0.0, 0.0), -DVec3::X),
-        (DVec3::ZERO, DVec3::Y),
-        (DVec3::new(0.0, 0.2, 0.0), -DVec3::Y),
-    ] {
-        bodies.add_plane(p, n, 0);
-    }
+    let mut bodies = common::open_box(0.2);
     let pack = GrainPack {
         count: 150,
         min: [0.0, 0.0, 0.002],
@@ -109,9 +102,7 @@ fn pile(stiffness: Option<f64>, ddm: Option<DdmSettings>) -> World {
         flatness: 1.1,
         seed: 5,
     };
-    for g in pack.build().unwrap() {
-        bodies.add_polyhedron(g, 2700.0, BodyKind::Dynamic, 1);
-    }
+    common::pour(&mut bodies, &pack, 2700.0, 1);
     let settings = StepSettings {
         dt: 4e-4,
         theta: 0.55,

@@ -3,6 +3,8 @@
 //! within the alert distance of the floor settles onto it (Signorini on the predicted gap)
 //! and carries its weight.
 
+mod common;
+
 use ballast_engine::bodies::{BodyKind, BodySet};
 use ballast_engine::laws::FrictionTable;
 use ballast_engine::math::DVec3;
@@ -12,16 +14,7 @@ use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, SolverSettings
 use ballast_engine::world::{StepSettings, World};
 
 fn pile(norm: ConvergenceNorm) -> World {
-    let mut bodies = BodySet::default();
-    bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
-    for (p, n) in [
-        (DVec3::ZERO, DVec3::X),
-        (DVec3::new(0.15, 0.0, 0.0), -DVec3::X),
-        (DVec3::ZERO, DVec3::Y),
-        (DVec3::new(0.0, 0.15, 0.0), -DVec3::Y),
-    ] {
-        bodies.add_plane(p, n, 0);
-    }
+    let mut bodies = common::open_box(0.15);
     let pack = GrainPack {
         count: 80,
         min: [0.0, 0.0, 0.002],
@@ -32,9 +25,7 @@ fn pile(norm: ConvergenceNorm) -> World {
         flatness: 1.1,
         seed: 11,
     };
-    for g in pack.build().unwrap() {
-        bodies.add_polyhedron(g, 2700.0, BodyKind::Dynamic, 1);
-    }
+    common::pour(&mut bodies, &pack, 2700.0, 1);
     let settings = StepSettings {
         dt: 5e-4,
         solver: SolverSettings {

@@ -4,6 +4,8 @@
 //! drives are kinematic bodies bit for bit; the same digest on 1 and 2 threads, monolithic and
 //! under domain decomposition.
 
+mod common;
+
 use ballast_engine::bodies::{BodyKind, BodySet, Driver, Term};
 use ballast_engine::digest::state_digest;
 use ballast_engine::laws::FrictionTable;
@@ -213,16 +215,7 @@ impl ReportOk for World {
 /// A paddle with a horizontal force limit stirs a small pile: the run exercises drive rows
 /// that saturate and rows that do not.
 fn stirred_pile(ddm: Option<[usize; 3]>, limit: f64) -> World {
-    let mut bodies = BodySet::default();
-    bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
-    for (p, n) in [
-        (DVec3::new(0.0, 0.0, 0.0), DVec3::X),
-        (DVec3::new(0.2, 0.0, 0.0), -DVec3::X),
-        (DVec3::new(0.0, 0.0, 0.0), DVec3::Y),
-        (DVec3::new(0.0, 0.2, 0.0), -DVec3::Y),
-    ] {
-        bodies.add_plane(p, n, 0);
-    }
+    let mut bodies = common::open_box(0.2);
     let mut paddle = ConvexPolyhedron::cuboid(DVec3::new(0.005, 0.05, 0.03)).unwrap();
     paddle.position = DVec3::new(0.03, 0.1, 0.05);
     let pd = bodies.add_polyhedron(paddle, 7850.0, BodyKind::Kinematic, 2);
@@ -248,9 +241,7 @@ fn stirred_pile(ddm: Option<[usize; 3]>, limit: f64) -> World {
         flatness: 1.0,
         seed: 7,
     };
-    for g in pack.build().unwrap() {
-        bodies.add_polyhedron(g, RHO, BodyKind::Dynamic, 1);
-    }
+    common::pour(&mut bodies, &pack, RHO, 1);
     let mut s = StepSettings {
         dt: 5e-4,
         solver: SolverSettings {

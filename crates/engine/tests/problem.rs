@@ -3,7 +3,8 @@
 //! the same local velocities as the engine's matrix-free `V = V_free + M⁻¹ H r`; NLGS on the
 //! assembled `(W, q, μ)` reproduces the engine's sweep, impulses and residual.
 
-use ballast_engine::bodies::{BodyKind, BodySet};
+mod common;
+
 use ballast_engine::laws::ContactStatus;
 use ballast_engine::laws::FrictionTable;
 use ballast_engine::math::{DMat3, DVec3};
@@ -18,16 +19,7 @@ fn prepared_pile() -> World {
 
 /// [`prepared_pile`] with contacts of the given stiffness (N/m; `None`: rigid).
 fn prepared_pile_with(contact_stiffness: Option<f64>) -> World {
-    let mut bodies = BodySet::default();
-    bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
-    for (p, n) in [
-        (DVec3::ZERO, DVec3::X),
-        (DVec3::new(0.15, 0.0, 0.0), -DVec3::X),
-        (DVec3::ZERO, DVec3::Y),
-        (DVec3::new(0.0, 0.15, 0.0), -DVec3::Y),
-    ] {
-        bodies.add_plane(p, n, 0);
-    }
+    let mut bodies = common::open_box(0.15);
     let pack = GrainPack {
         count: 80,
         min: [0.0, 0.0, 0.002],
@@ -38,9 +30,7 @@ fn prepared_pile_with(contact_stiffness: Option<f64>) -> World {
         flatness: 1.1,
         seed: 11,
     };
-    for g in pack.build().unwrap() {
-        bodies.add_polyhedron(g, 2700.0, BodyKind::Dynamic, 1);
-    }
+    common::pour(&mut bodies, &pack, 2700.0, 1);
     let settings = StepSettings {
         dt: 5e-4,
         contact_stiffness,
