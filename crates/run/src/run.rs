@@ -10,7 +10,7 @@ use crate::report::write_run_report;
 use ballast_engine::health::{initial_warnings, Divergence, HealthCheck};
 use ballast_engine::output::checkpoint::{
     checkpoint_path, list_checkpoints, newest_valid_checkpoint, prune_checkpoints,
-    remove_partial_checkpoints, write_checkpoint_with_stats,
+    remove_partial_checkpoints, write_checkpoint_with_stats, Snapshot,
 };
 use ballast_engine::output::vtk::VtkWriter;
 use ballast_engine::output::{
@@ -220,6 +220,8 @@ pub struct Job {
     track: Option<TrackParts>,
     /// Bounds of the scene as built, before any checkpoint is read (the same on resume).
     health: HealthCheck,
+    /// The state before the step [`Job::checked_step`] is taking, put back if it diverges.
+    before: Snapshot,
 }
 
 /// The track-specific parts of a run.
@@ -429,6 +431,7 @@ impl Job {
                 world,
                 source: source.to_string(),
                 text,
+                before: Snapshot::default(),
             }
         };
         if let Some(d) = &job.world.settings.ddm {
@@ -444,6 +447,11 @@ impl Job {
                 };
                 format!("{source}: {field}{e}")
             })?;
+            if let Some(w) =
+                subdomain_warning(&d.subdomains, grains, o.subdomains.is_some(), o.names)
+            {
+                observer.message(&w);
+            }
         }
         Ok(job)
     }
@@ -527,6 +535,7 @@ impl Job {
             }),
             world: model.world,
             source: source.to_string(),
+            before: Snapshot::default(),
         })
     }
 
@@ -555,6 +564,38 @@ impl Job {
         let r = self.world.step();
         self.stats.add(&r);
         r
+    }
+
+    /// One step as [`Job::step`], under the health check a run is under: the first step of a
+    /// simulation checks its initial state first (as [`Job::run`] does), and a step after
+    /// which the state is no longer a physical one gives the [`Divergence`] instead of its
+    /// report, the world and the statistics put back to the state before it (bit for bit:
+    /// stepping on repeats the same step). Not put back when the step was detected before
+    /// ([`World::is_detected`]): its state before detection is not kept, and the world is
+    /// left in the diverged state. An initial state out of bounds is left as it is, detected.
+    /// The check only reads the world: checked steps give the same states as unchecked ones.
+    pub fn checked_step(&mut self) -> Result<StepReport, Divergence> {
+        let restorable = !self.world.is_detected();
+        if restorable {
+            self.before.retake(&self.world, Some(&self.stats));
+        }
+        if self.world.step_index == 0 {
+            // Detected now, so that bodies placed inside each other are seen; the step then
+            // solves that detection (the same result).
+            self.world.detect();
+            self.health.initial().check(&self.world)?;
+        }
+        let r = self.step();
+        if let Err(d) = self.health.check(&self.world) {
+            if restorable {
+                // The snapshot is of this world: restoring it cannot fail.
+                if let Ok(stats) = self.before.restore(&mut self.world) {
+                    self.stats = stats.unwrap_or_default();
+                }
+            }
+            return Err(d);
+        }
+        Ok(r)
     }
 
     /// The resolved scenario: what a run writes to `scenario.toml`.
@@ -868,6 +909,46 @@ impl Job {
             steps: world.step_index,
         })
     }
+}
+
+/// Subdomains holding fewer grains than this on average cost more than they save. Measured
+/// on a settled pile of 1,000 grains at 100 sweeps a step (`ballast bench --scaling --sweeps
+/// 100`, one thread, `BENCHMARKS.md`): 2 subdomains make a step 16 % cheaper than monolithic
+/// NLGS, and the gain shrinks with the subdomains: 7 % at 8 grains each (11x11x1, 22 % of the
+/// contacts on the interface, the phase that scales worst with threads), 3 % at 3.9
+/// (16x16x1, 32 %); at 2 and 1 grain a step costs 5 % and 15 % more than monolithic (41 %,
+/// 50 % on the interface). More subdomains than grains are refused
+/// ([`DdmSettings::check_grains`]).
+pub const WARN_GRAINS_PER_SUBDOMAIN: usize = 10;
+
+/// A warning when the partition `dims` leaves fewer than [`WARN_GRAINS_PER_SUBDOMAIN`] of the
+/// `grains` per subdomain on average (none for a monolithic run): naming the option that set
+/// it (`by_option`) or `ddm.subdomains`, the value, the grains per subdomain and the largest
+/// partition advised. The run is unchanged: a decomposition changes speed, not validity.
+pub fn subdomain_warning(
+    dims: &[usize; 3],
+    grains: usize,
+    by_option: bool,
+    names: &ArgNames,
+) -> Option<String> {
+    let n: usize = dims.iter().product();
+    if n <= 1 || grains >= n.saturating_mul(WARN_GRAINS_PER_SUBDOMAIN) {
+        return None;
+    }
+    let [x, y, z] = *dims;
+    let name = if by_option {
+        format!("{} {x}x{y}x{z}", names.subdomains)
+    } else {
+        format!("ddm.subdomains = [{x}, {y}, {z}]")
+    };
+    Some(format!(
+        "warning: {name}: {n} subdomains for {grains} grains, {:.1} grains per subdomain on \
+         average; below {WARN_GRAINS_PER_SUBDOMAIN} a decomposition costs more than it saves \
+         (the run is slower than with fewer subdomains, same results): use at most {} \
+         subdomains here, or none (1x1x1)",
+        grains as f64 / n as f64,
+        (grains / WARN_GRAINS_PER_SUBDOMAIN).max(1)
+    ))
 }
 
 /// What a stopped run leaves in `out` to continue from: its last checkpoint, or none.
