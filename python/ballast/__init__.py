@@ -113,10 +113,21 @@ class Simulation:
         sim._core.load_checkpoint(os.fspath(path))
         return sim
 
-    def step(self, n=1, progress=None, every=100):
+    def step(self, n=1, progress=None, every=100, check=True):
         """Advances ``n`` steps, with the GIL released (other Python threads run meanwhile);
-        ``progress(step_index, time)`` is called every ``every`` steps."""
-        self._core.step(int(n), progress, int(every))
+        ``progress(step_index, time)`` is called every ``every`` steps.
+
+        Every step is under the health check of ``ballast run`` (the README's Running
+        section): a state that is no longer physical (non-finite, a body faster than
+        ``max_speed``, an overlap beyond ``max_overlap``) raises ``DivergedError`` naming the
+        step, the bodies and the quantity. The simulation is then put back to its state
+        before the diverged step (``step_index`` is the last healthy step; stepping on repeats
+        the same step), unless that step was detected first by :meth:`detect`, which leaves
+        the diverged state; an initial state out of bounds is refused before the first step
+        and left as it is. ``check=False`` skips the check (and the copy of the state it
+        keeps: about 240 bytes per body and 170 per contact point); checked and unchecked
+        steps give the same states."""
+        self._core.step(int(n), progress, int(every), bool(check))
 
     def run(self, out, steps=None, overwrite=False, resume=False, progress=None, every=100,
             quiet=False):

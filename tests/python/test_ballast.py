@@ -255,6 +255,50 @@ def test_run_stopped_by_the_health_check_raises(tmp_path):
     assert s["status"] == "diverged" and s["divergence"]["step"] == 1
 
 
+def pile_text(*replace):
+    """``examples/pile.toml`` (300 grains) with each ``(old, new)`` of ``replace`` applied."""
+    with open(os.path.join(ROOT, "examples", "pile.toml")) as f:
+        text = f.read()
+    for old, new in replace:
+        assert old in text
+        text = text.replace(old, new, 1)
+    return text
+
+
+def test_step_stops_a_diverging_simulation_at_its_last_healthy_step():
+    sim = ballast.Simulation.from_toml(pile_text(("gravity = [0, 0, -9.81]", "gravity = [0, 0, -1e200]")))
+    initial = sim.state_digest()
+    with pytest.raises(
+        ballast.DivergedError,
+        match=r'diverged at step 1 \(t = 2\.000e-4 s\): body \d+ \(group "grain"\) moves at '
+        r"2\.000e196 m/s, more than the bound .*; the simulation is put back to step 0",
+    ):
+        sim.step(10)
+    assert sim.step_index == 0 and sim.state_digest() == initial
+    assert np.isfinite(sim.velocities).all()
+
+
+def test_checked_steps_are_bit_identical_and_put_back_exactly():
+    checked = ballast.Simulation.from_toml(pile_text())
+    plain = ballast.Simulation.from_toml(pile_text())
+    checked.step(300)
+    plain.step(300, check=False)
+    assert checked.state_digest() == plain.state_digest()
+    # Falling grains pass 0.05 m/s at step 26 (dt = 2e-4 s): put back to step 25, from which
+    # the same step follows.
+    slow = pile_text(("alert = 1e-3", "alert = 1e-3\nmax_speed = 0.05"))
+    sim = ballast.Simulation.from_toml(slow)
+    with pytest.raises(ballast.DivergedError, match="step 26 .* put back to step 25"):
+        sim.step(100, every=7)
+    assert sim.step_index == 25 and sim.summary()["steps"] == 25
+    ref = ballast.Simulation.from_toml(slow)
+    ref.step(25, check=False)
+    assert sim.state_digest() == ref.state_digest()
+    sim.step(1, check=False)
+    ref.step(1, check=False)
+    assert sim.state_digest() == ref.state_digest()
+
+
 def assert_releases_the_gil(call):
     """A second Python thread ticks about once a millisecond while `call()` runs: none would
     with the GIL held."""

@@ -861,3 +861,372 @@ fn ctrl_c_checkpoints_and_resumes() {
     assert_eq!(summary(&d)["state_digest"], summary(&e)["state_digest"]);
     assert_eq!(summary(&d)["status"], "completed");
 }
+
+/// The rows of `DIR/series.csv`, header included, without the columns of wall-clock times
+/// (`t_*`): what two runs of one scenario must share.
+fn rows_without_timings(dir: &std::path::Path) -> Vec<String> {
+    let text = std::fs::read_to_string(dir.join("series.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let keep: Vec<bool> = header.iter().map(|h| !h.starts_with("t_")).collect();
+    std::iter::once(header.join(","))
+        .chain(lines.map(|l| {
+            l.split(',')
+                .zip(&keep)
+                .filter(|(_, &k)| k)
+                .map(|(x, _)| x)
+                .collect::<Vec<_>>()
+                .join(",")
+        }))
+        .collect()
+}
+
+/// `summary.json` without its wall-clock timings.
+fn summary_without_timings(dir: &std::path::Path) -> serde_json::Value {
+    let mut s = summary(dir);
+    s.as_object_mut().unwrap().remove("timings_s");
+    s
+}
+
+/// The step of the last whole row of `series.csv` (0 when there is none), from its tail.
+fn last_row(path: &std::path::Path) -> u64 {
+    use std::io::{Read, Seek, SeekFrom};
+    let Ok(mut f) = std::fs::File::open(path) else {
+        return 0;
+    };
+    let len = f.metadata().map_or(0, |m| m.len());
+    let mut tail = Vec::new();
+    if f.seek(SeekFrom::Start(len.saturating_sub(1024))).is_err()
+        || f.read_to_end(&mut tail).is_err()
+    {
+        return 0;
+    }
+    let text = String::from_utf8_lossy(&tail);
+    let whole = &text[..text.rfind('\n').unwrap_or(0)];
+    whole
+        .rsplit('\n')
+        .next()
+        .and_then(|l| l.split(',').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0)
+}
+
+/// The names in `dir` ending in `.tmp`: what a write cut short leaves.
+fn tmp_files(dir: &std::path::Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .map(|d| {
+            d.filter_map(|e| e.ok()?.file_name().into_string().ok())
+                .filter(|n| n.ends_with(".tmp"))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// Seeded pseudo-random numbers (xorshift64): the kill moments are the same every time.
+struct Moments(u64);
+
+impl Moments {
+    fn below(&mut self, n: u64) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0 % n.max(1)
+    }
+}
+
+/// `kill -9` at a dozen seeded moments — at a step, while a checkpoint is being written,
+/// while a `--resume` starts (reading its checkpoint, rewriting `series.csv`, reopening the
+/// ParaView series) — each followed by `--resume` (killed again in turn): the run ends with
+/// the `summary.json` and the `series.csv` rows of a run never killed. Checkpoints every step
+/// on a pile whose steps are cheaper than its checkpoints (fsync'd): most of the run's time is
+/// spent writing them.
+#[cfg(unix)]
+#[test]
+fn killed_at_random_moments_resumes_bit_identical() {
+    use std::time::{Duration, Instant};
+    const STEPS: u64 = 1000;
+    const KILLS: u64 = 12;
+    let (scen, d, e) = (tmp("kill9-scenario"), tmp("kill9"), tmp("kill9-ref"));
+    let f = pile_variant(
+        &scen,
+        "pile.toml",
+        &[(
+            "output_interval = 50",
+            "output_interval = 1\ncheckpoint_interval = 1\nvtk_interval = 100",
+        )],
+    );
+    let steps = STEPS.to_string();
+    let start = |resume: bool, dir: &std::path::Path| {
+        let mut cmd = ballast();
+        cmd.arg("run")
+            .arg(&f)
+            .args(["--steps", &steps, "--threads", "1", "--quiet"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+        if resume {
+            cmd.arg("--resume").arg(dir);
+        } else {
+            cmd.args(["--overwrite", "--out"]).arg(dir);
+        }
+        cmd.spawn().unwrap()
+    };
+    let st = start(false, &e).wait_with_output().unwrap();
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+
+    let series = d.join("series.csv");
+    let ckpt = d.join("checkpoints");
+    let mut rng = Moments(0x9e37_79b9_7f4a_7c15);
+    let clock = Instant::now();
+    // How long a resume takes to compute its first row (the longest seen), the window that
+    // kills "during a resume" are drawn in.
+    let mut startup = Duration::from_millis(5);
+    let (mut mid_write, mut mid_resume, mut missed) = (0, 0, Vec::new());
+    let mut log = Vec::new();
+    for trial in 0..KILLS {
+        // A kill meant for a checkpoint write or a resume's start that lands after it is tried
+        // again (a fresh seeded moment), so that every such trial hits its phase.
+        let mut hit = false;
+        for attempt in 0..5 {
+            // A run killed before its first checkpoint cannot be resumed: it starts again.
+            let resume = !checkpoint_steps(&d).is_empty();
+            let newest = checkpoint_steps(&d).last().copied();
+            let row = last_row(&series);
+            let spawned = Instant::now();
+            let mut child = start(resume, &d);
+            let kind = if resume { trial % 3 } else { 0 };
+            let exited = |c: &mut std::process::Child| c.try_wait().unwrap().is_some();
+            match kind {
+                // At a step: once a seeded number of rows more are written.
+                0 => {
+                    let left = STEPS - row.min(STEPS);
+                    let target = row + 1 + rng.below(2 * left / (KILLS - trial));
+                    let mut first = None;
+                    while last_row(&series) < target && !exited(&mut child) {
+                        if first.is_none() && last_row(&series) > row {
+                            first = Some(spawned.elapsed());
+                        }
+                        std::thread::sleep(Duration::from_micros(200));
+                    }
+                    if resume {
+                        startup = startup.max(first.unwrap_or_default());
+                    }
+                }
+                // While a checkpoint is written: a few rows on, as soon as a temporary file
+                // shows (the resume has deleted those of earlier kills by then).
+                1 => {
+                    let target = row + 1 + rng.below(50);
+                    while (last_row(&series) < target || tmp_files(&ckpt).is_empty())
+                        && !exited(&mut child)
+                    {
+                        std::hint::spin_loop();
+                    }
+                }
+                // While the resume starts: a seeded delay within its start-up time.
+                _ => {
+                    std::thread::sleep(Duration::from_micros(rng.below(startup.as_micros() as u64)))
+                }
+            }
+            let _ = child.kill();
+            let out = child.wait_with_output().unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(!err.contains("panicked"), "trial {trial}: {err}");
+            let left = tmp_files(&ckpt);
+            // In its phase: a checkpoint's temporary file left behind; no new checkpoint.
+            let landed = match kind {
+                1 => !left.is_empty(),
+                2 => checkpoint_steps(&d).last().copied() == newest,
+                _ => true,
+            };
+            mid_write += usize::from(kind == 1 && landed);
+            mid_resume += usize::from(kind == 2 && landed);
+            log.push(format!(
+                "trial {trial}.{attempt}: kind {kind}, {} → row {}, checkpoint {:?}, left \
+                 {left:?}",
+                if resume { "resume" } else { "start" },
+                last_row(&series),
+                checkpoint_steps(&d).last()
+            ));
+            assert!(clock.elapsed().as_secs() < 120, "{log:#?}");
+            if landed {
+                hit = true;
+                break;
+            }
+        }
+        if !hit {
+            missed.push(trial);
+        }
+    }
+    let out = start(true, &d).wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}\n{log:#?}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("{log:#?}");
+    assert!(
+        missed.is_empty() && mid_write >= 3 && mid_resume >= 3,
+        "kills out of their phase in trials {missed:?}: {log:#?}"
+    );
+    assert_eq!(summary(&d)["status"], "completed");
+    assert!(tmp_files(&ckpt).is_empty(), "a resume deletes cut writes");
+    assert_eq!(
+        summary_without_timings(&d),
+        summary_without_timings(&e),
+        "{log:#?}"
+    );
+    let (rows, expected) = (rows_without_timings(&d), rows_without_timings(&e));
+    assert_eq!(rows.len() as u64, 1 + STEPS);
+    assert!(rows == expected, "series.csv differs: {log:#?}");
+    for name in ["grains.pvd", "contacts.pvd"] {
+        let read = |dir: &std::path::Path| std::fs::read_to_string(dir.join(name)).unwrap();
+        assert_eq!(read(&d), read(&e), "{name}");
+    }
+}
+
+/// The run folder's file size limit (`RLIMIT_FSIZE`, a full disk as a run sees it: writes
+/// fail with EFBIG) runs out in the middle of a run, once while a checkpoint is written and
+/// once while a `series.csv` row is: the run stops with exit code 1 and one line naming the
+/// file, with no panic; its rows are whole and consecutive, no temporary file is left, and
+/// once the limit is lifted `--resume` ends bit-identical to a run never stopped.
+#[cfg(unix)]
+#[test]
+fn a_full_disk_stops_the_run_and_loses_nothing() {
+    use std::os::unix::process::CommandExt;
+    const STEPS: &str = "800";
+    let (scen, e) = (tmp("fsize-scenario"), tmp("fsize-ref"));
+    let f = pile_variant(
+        &scen,
+        "pile.toml",
+        &[(
+            "output_interval = 50",
+            "output_interval = 1\ncheckpoint_interval = 10\nvtk_interval = 0",
+        )],
+    );
+    let run = |dir: &std::path::Path, limit: Option<u64>, resume: bool| {
+        let mut cmd = ballast();
+        cmd.arg("run")
+            .arg(&f)
+            .args(["--steps", STEPS, "--threads", "1", "--quiet"])
+            .arg(if resume { "--resume" } else { "--out" })
+            .arg(dir);
+        if let Some(limit) = limit {
+            // In the child, before exec: SIGXFSZ ignored (kept across exec), so that a write
+            // past the limit fails with EFBIG instead of killing the process.
+            unsafe {
+                cmd.pre_exec(move || {
+                    libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+                    let mut r = libc::rlimit {
+                        rlim_cur: 0,
+                        rlim_max: 0,
+                    };
+                    if libc::getrlimit(libc::RLIMIT_FSIZE, &mut r) != 0 {
+                        return Err(std::io::Error::last_os_error());
+                    }
+                    r.rlim_cur = limit as libc::rlim_t;
+                    if libc::setrlimit(libc::RLIMIT_FSIZE, &r) != 0 {
+                        return Err(std::io::Error::last_os_error());
+                    }
+                    Ok(())
+                });
+            }
+        }
+        cmd.output()
+    };
+    let reference = run(&e, None, false).unwrap();
+    assert!(reference.status.success());
+    let mut failed_files = Vec::new();
+    // Checkpoints are 73 kB before the grains touch (step 300) and grow with the contacts
+    // after; series.csv grows by 109 bytes a row: at 75 kB a checkpoint fails first, at 80 kB
+    // a row of series.csv (at step 734).
+    for limit in [75_000u64, 80_000] {
+        let d = tmp(&format!("fsize-{limit}"));
+        let out = match run(&d, Some(limit), false) {
+            Ok(out) => out,
+            Err(e) => {
+                eprintln!("skipped: cannot set a file size limit here ({e})");
+                return;
+            }
+        };
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        if out.status.success() {
+            eprintln!("skipped: the file size limit is not enforced here");
+            return;
+        }
+        assert_eq!(out.status.code(), Some(1), "{err}");
+        assert_eq!(err.lines().count(), 1, "one line: {err}");
+        assert!(
+            !err.contains("panicked") && !err.contains("backtrace"),
+            "{err}"
+        );
+        let prefix = format!("error: write error in {}/", d.display());
+        assert!(err.starts_with(&prefix), "{err}");
+        let file = err[prefix.len()..].split(':').next().unwrap().to_string();
+        assert!(err.contains("(os error"), "{err}");
+        assert!(err.contains("the run is stopped after step"), "{err}");
+        // Whole, consecutive rows; no temporary file left behind.
+        let text = std::fs::read_to_string(d.join("series.csv")).unwrap();
+        assert!(
+            text.ends_with('\n'),
+            "{file}: a cut row is left in series.csv"
+        );
+        let columns = text.lines().next().unwrap().split(',').count();
+        for (k, l) in text.lines().skip(1).enumerate() {
+            assert_eq!(l.split(',').count(), columns, "{l}");
+            assert!(l.starts_with(&format!("{},", k + 1)), "{l}");
+        }
+        assert!(tmp_files(&d).is_empty() && tmp_files(&d.join("checkpoints")).is_empty());
+        let kept = *checkpoint_steps(&d)
+            .last()
+            .expect("checkpoints before the limit");
+        assert!(
+            err.contains(&format!("its last checkpoint (step {kept}) is kept")),
+            "{err}"
+        );
+        // Space is back: the newest valid checkpoint resumes, bit-identical.
+        let resumed = run(&d, None, true).unwrap();
+        assert!(
+            resumed.status.success(),
+            "{}",
+            String::from_utf8_lossy(&resumed.stderr)
+        );
+        assert_eq!(summary_without_timings(&d), summary_without_timings(&e));
+        assert!(
+            rows_without_timings(&d) == rows_without_timings(&e),
+            "{file}"
+        );
+        failed_files.push(file);
+    }
+    assert!(
+        failed_files[0].starts_with("checkpoints/checkpoint_") && failed_files[1] == "series.csv",
+        "the limits no longer hit a checkpoint, then series.csv (checkpoint sizes changed?): \
+         {failed_files:?}"
+    );
+}
+
+/// `--subdomains` splitting the grains into subdomains of fewer than 10 on average is warned,
+/// naming the option, the value and the grains per subdomain; the run goes on.
+#[test]
+fn small_subdomains_are_warned() {
+    let d = tmp("small-subdomains");
+    let (code, err) = run_args(&[
+        example("pile.toml").as_os_str(),
+        "--steps".as_ref(),
+        "2".as_ref(),
+        "--subdomains".as_ref(),
+        "8x8x1".as_ref(),
+        "--out".as_ref(),
+        d.as_os_str(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        err.contains(
+            "warning: --subdomains 8x8x1: 64 subdomains for 300 grains, 4.7 grains per \
+             subdomain on average; below 10"
+        ),
+        "{err}"
+    );
+}

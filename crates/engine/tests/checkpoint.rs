@@ -8,8 +8,9 @@ use ballast_engine::laws::{ContactStatus, FrictionTable};
 use ballast_engine::math::{DQuat, DVec3};
 use ballast_engine::output::checkpoint::{
     checkpoint_path, encode_checkpoint, fnv1a64, list_checkpoints, newest_valid_checkpoint,
-    prune_checkpoints, read_checkpoint, read_checkpoint_with_stats, write_checkpoint,
-    write_checkpoint_with_stats, CheckpointError, Corruption, FORMAT_VERSION,
+    prune_checkpoints, read_checkpoint, read_checkpoint_with_stats, remove_partial_checkpoints,
+    write_checkpoint, write_checkpoint_with_stats, CheckpointError, Corruption, Snapshot,
+    FORMAT_VERSION,
 };
 use ballast_engine::output::RunStats;
 use ballast_engine::scenario::presets::pile;
@@ -601,6 +602,41 @@ fn prune_keeps_the_newest_checkpoints() {
     assert_eq!(list_checkpoints(&dir).unwrap().len(), 1, "the newest stays");
     assert!(dir.join("checkpoint_0000000050.tmp").exists());
     assert!(dir.join("summary.json").exists());
+    // A resume deletes the cut writes, and only them.
+    write_bytes(&dir.join("series.tmp"), b"x");
+    let removed = remove_partial_checkpoints(&dir).unwrap();
+    assert_eq!(removed, [dir.join("checkpoint_0000000050.tmp")]);
+    assert!(dir.join("series.tmp").exists() && dir.join("summary.json").exists());
+    assert_eq!(list_checkpoints(&dir).unwrap().len(), 1);
+}
+
+/// A snapshot taken between two steps puts the same world back exactly (statistics, warm
+/// start, detection anchors and clock included): stepping on repeats what it did.
+#[test]
+fn a_snapshot_puts_the_world_back_exactly() {
+    let mut w = build(&scenario());
+    let mut stats = RunStats::default();
+    run(&mut w, SPLIT, &mut stats);
+    let snap = Snapshot::take(&w, Some(&stats));
+    assert!(!snap.is_empty() && snap.len() < encode_checkpoint(&w, Some(&stats)).len());
+    let mut later = stats.clone();
+    run(&mut w, 20, &mut later);
+    let (digest, contacts) = (state_digest(&w.bodies), w.contacts.clone());
+    let back = snap.restore(&mut w).unwrap().unwrap();
+    assert_eq!(w.step_index, SPLIT);
+    assert_eq!(state_digest(&w.bodies), at_split().digest);
+    assert_eq!(
+        (back.steps, back.iterations_sum),
+        (stats.steps, stats.iterations_sum)
+    );
+    run(&mut w, 20, &mut stats);
+    assert_eq!(state_digest(&w.bodies), digest);
+    assert_contacts_identical(&w.contacts, &contacts);
+    assert_eq!(stats.iterations_sum, later.iterations_sum);
+    // A world of other bodies is refused and left as it is.
+    let mut other = build(&pile(GRAINS + 1, DIAMETER, SEED, TOTAL));
+    assert!(snap.restore(&mut other).unwrap_err().contains("bodies"));
+    assert_eq!(other.step_index, 0);
 }
 
 /// Top-level field names in a `{:#?}` rendering.

@@ -37,8 +37,9 @@ pyo3::create_exception!(
     ballast,
     DivergedError,
     PyRuntimeError,
-    "A run stopped by the health check: its state stopped being physical (the message names \
-     the step, the bodies and the quantity); its run folder is written."
+    "A run or a step stopped by the health check: its state stopped being physical (the \
+     message names the step, the bodies and the quantity). After `run`, its run folder is \
+     written; after `step`, the simulation is back at its last healthy step."
 );
 
 /// A simulation: a world stepping through a scenario (engine scenario or track scenario),
@@ -174,25 +175,51 @@ impl Simulation {
     }
 
     /// Advances `n` steps with the GIL released; `progress(step_index, time)` is called
-    /// (with the GIL) every `every` steps.
-    #[pyo3(signature = (n = 1, progress = None, every = 100))]
+    /// (with the GIL) every `every` steps. With `check`, every step is under the run's health
+    /// check: a step that diverges raises `DivergedError` naming the step, the bodies and the
+    /// quantity, the simulation put back to its state before that step (see
+    /// `Job::checked_step`).
+    #[pyo3(signature = (n = 1, progress = None, every = 100, check = true))]
     fn step(
         &mut self,
         py: Python<'_>,
         n: u64,
         progress: Option<Py<PyAny>>,
         every: u64,
+        check: bool,
     ) -> PyResult<()> {
         let every = every.max(1);
         let mut done = 0;
         while done < n {
             let chunk = (n - done).min(every);
             let job = &mut self.job;
-            py.detach(|| {
+            let stepped = py.detach(|| -> Result<(), String> {
                 for _ in 0..chunk {
-                    job.step();
+                    if !check {
+                        job.step();
+                        continue;
+                    }
+                    let restorable = !job.world().is_detected();
+                    job.checked_step().map_err(|d| {
+                        let now = job.world().step_index;
+                        let left = if d.step == 0 {
+                            "the simulation is left at its initial state (step 0)".to_string()
+                        } else if restorable {
+                            format!(
+                                "the simulation is put back to step {now}, its last healthy state"
+                            )
+                        } else {
+                            format!(
+                                "the simulation is left in the diverged state of step {now} \
+                                 (the step was detected by detect() first)"
+                            )
+                        };
+                        format!("{d}; {left}")
+                    })?;
                 }
+                Ok(())
             });
+            stepped.map_err(DivergedError::new_err)?;
             done += chunk;
             if let Some(f) = &progress {
                 f.call1(py, (self.world().step_index, self.world().time))?;

@@ -10,11 +10,11 @@ use crate::report::write_run_report;
 use ballast_engine::health::{initial_warnings, Divergence, HealthCheck};
 use ballast_engine::output::checkpoint::{
     checkpoint_path, list_checkpoints, newest_valid_checkpoint, prune_checkpoints,
-    write_checkpoint_with_stats,
+    remove_partial_checkpoints, write_checkpoint_with_stats, Snapshot,
 };
 use ballast_engine::output::vtk::VtkWriter;
 use ballast_engine::output::{
-    json_number, series_row, write_atomic, RunStats, Summary, SERIES_HEADER,
+    json_number, naming, series_row, write_atomic, RunStats, Summary, SERIES_HEADER,
 };
 use ballast_engine::scenario::Scenario;
 use ballast_engine::solver::DdmSettings;
@@ -220,6 +220,8 @@ pub struct Job {
     track: Option<TrackParts>,
     /// Bounds of the scene as built, before any checkpoint is read (the same on resume).
     health: HealthCheck,
+    /// The state before the step [`Job::checked_step`] is taking, put back if it diverges.
+    before: Snapshot,
 }
 
 /// The track-specific parts of a run.
@@ -429,6 +431,7 @@ impl Job {
                 world,
                 source: source.to_string(),
                 text,
+                before: Snapshot::default(),
             }
         };
         if let Some(d) = &job.world.settings.ddm {
@@ -444,6 +447,11 @@ impl Job {
                 };
                 format!("{source}: {field}{e}")
             })?;
+            if let Some(w) =
+                subdomain_warning(&d.subdomains, grains, o.subdomains.is_some(), o.names)
+            {
+                observer.message(&w);
+            }
         }
         Ok(job)
     }
@@ -527,6 +535,7 @@ impl Job {
             }),
             world: model.world,
             source: source.to_string(),
+            before: Snapshot::default(),
         })
     }
 
@@ -555,6 +564,38 @@ impl Job {
         let r = self.world.step();
         self.stats.add(&r);
         r
+    }
+
+    /// One step as [`Job::step`], under the health check a run is under: the first step of a
+    /// simulation checks its initial state first (as [`Job::run`] does), and a step after
+    /// which the state is no longer a physical one gives the [`Divergence`] instead of its
+    /// report, the world and the statistics put back to the state before it (bit for bit:
+    /// stepping on repeats the same step). Not put back when the step was detected before
+    /// ([`World::is_detected`]): its state before detection is not kept, and the world is
+    /// left in the diverged state. An initial state out of bounds is left as it is, detected.
+    /// The check only reads the world: checked steps give the same states as unchecked ones.
+    pub fn checked_step(&mut self) -> Result<StepReport, Divergence> {
+        let restorable = !self.world.is_detected();
+        if restorable {
+            self.before.retake(&self.world, Some(&self.stats));
+        }
+        if self.world.step_index == 0 {
+            // Detected now, so that bodies placed inside each other are seen; the step then
+            // solves that detection (the same result).
+            self.world.detect();
+            self.health.initial().check(&self.world)?;
+        }
+        let r = self.step();
+        if let Err(d) = self.health.check(&self.world) {
+            if restorable {
+                // The snapshot is of this world: restoring it cannot fail.
+                if let Ok(stats) = self.before.restore(&mut self.world) {
+                    self.stats = stats.unwrap_or_default();
+                }
+            }
+            return Err(d);
+        }
+        Ok(r)
     }
 
     /// The resolved scenario: what a run writes to `scenario.toml`.
@@ -620,8 +661,9 @@ impl Job {
         let steps = o.steps.unwrap_or(self.steps);
         let sections = track.as_ref().map(|t| t.sections(steps));
         let io = |e: std::io::Error| format!("write error in {}: {e}", out.display());
-        let ckpt_dir = out.join("checkpoints");
         let series_path = out.join("series.csv");
+        let series_error = |e: std::io::Error| write_error(&series_path, e);
+        let ckpt_dir = out.join("checkpoints");
         let mut header = SERIES_HEADER.to_string();
         if let Some(t) = track {
             for n in t.indicators.names() {
@@ -660,6 +702,9 @@ impl Job {
             if !ckpt_dir.is_dir() {
                 return Err(no_checkpoint().into());
             }
+            // What the interrupted run was writing when it stopped is never read: its space
+            // is given back (best effort; the resume does not depend on it).
+            let _ = remove_partial_checkpoints(&ckpt_dir);
             let scan = newest_valid_checkpoint(&ckpt_dir, world)
                 .map_err(|e| format!("{}: {e}", (names.resume)(out)))?;
             for s in &scan.skipped {
@@ -697,45 +742,26 @@ impl Job {
                 ));
             }
             // Keep the rows up to the checkpoint: later ones were written by the interrupted
-            // run.
-            let old = std::fs::read_to_string(&series_path).unwrap_or_default();
-            let kept: Vec<&str> = old
-                .lines()
-                .skip(1)
-                .filter(|l| {
-                    l.split(',')
-                        .next()
-                        .and_then(|s| s.parse::<u64>().ok())
-                        .is_some_and(|s| s <= r.step)
-                })
-                .collect();
-            // Written whole and renamed into place before anything is appended: a resume
+            // run. Written whole and renamed into place before anything is appended: a resume
             // killed (or out of disk) before its next checkpoint still leaves every row up to
             // this one.
-            let mut kept_text = format!("{header}\n");
-            for l in kept {
-                kept_text.push_str(l);
-                kept_text.push('\n');
-            }
-            write_atomic(&series_path, kept_text.as_bytes()).map_err(io)?;
-            let f = std::io::BufWriter::new(
-                std::fs::OpenOptions::new()
-                    .append(true)
-                    .open(&series_path)
-                    .map_err(io)?,
-            );
-            let vtk = VtkWriter::resume(out, world.time).map_err(io)?;
+            let old = std::fs::read_to_string(&series_path).unwrap_or_default();
+            write_atomic(&series_path, rows_up_to(&old, &header, r.step).as_bytes())
+                .map_err(series_error)?;
+            let f = SeriesFile::open(&series_path).map_err(series_error)?;
+            let vtk = VtkWriter::resume(out, world.time).map_err(named_write_error)?;
             (f, vtk)
         } else {
             claim_folder(out, o.overwrite, names)?;
             *stats = RunStats::default();
-            write_atomic(&out.join("scenario.toml"), text.as_bytes()).map_err(io)?;
-            let mut f = std::io::BufWriter::new(std::fs::File::create(&series_path).map_err(io)?);
-            writeln!(f, "{header}").map_err(io)?;
-            f.flush().map_err(io)?;
-            let mut vtk = VtkWriter::new(out).map_err(io)?;
+            let scenario_path = out.join("scenario.toml");
+            write_atomic(&scenario_path, text.as_bytes())
+                .map_err(|e| write_error(&scenario_path, e))?;
+            write_atomic(&series_path, format!("{header}\n").as_bytes()).map_err(series_error)?;
+            let f = SeriesFile::open(&series_path).map_err(series_error)?;
+            let mut vtk = VtkWriter::new(out).map_err(named_write_error)?;
             if vtk_interval > 0 {
-                vtk.write_frame(world).map_err(io)?;
+                vtk.write_frame(world).map_err(named_write_error)?;
             }
             (f, vtk)
         };
@@ -778,8 +804,9 @@ impl Job {
                 // Stop here: the diverged step's row is written (it shows the fault), no
                 // checkpoint or frame is, so the last checkpoint is the last healthy state.
                 observer.finish();
-                writeln!(series, "{}", row(&r, world, false)).map_err(io)?;
-                series.flush().map_err(io)?;
+                series
+                    .append(&row(&r, world, false))
+                    .map_err(series_error)?;
                 let value = summary_json(world, stats, o.threads, track, None, Some(&d))?;
                 write_summary_and_report(out, source, text, &value, observer)?;
                 return Err(diverged(&d, out, names));
@@ -795,22 +822,30 @@ impl Job {
                     ));
                 }
             }
-            if k % output_interval == 0 || k == steps {
-                // Flushed row by row: a killed run keeps every row it computed.
-                writeln!(series, "{}", row(&r, world, true)).map_err(io)?;
-                series.flush().map_err(io)?;
-            }
-            if let Some(s) = &sections {
-                write_sections(s, k, world, out).map_err(io)?;
-            }
-            if vtk_interval > 0 && (k % vtk_interval == 0 || k == steps) {
-                vtk.write_frame(world).map_err(io)?;
-            }
-            if checkpoint_interval > 0 && k % checkpoint_interval == 0 && k != steps {
-                series.flush().map_err(io)?;
-                write_checkpoint_with_stats(world, Some(stats), &checkpoint_path(&ckpt_dir, k))
-                    .map_err(io)?;
-                prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
+            // What the step writes. A write that fails (a full disk) stops the run here: the
+            // rows and checkpoints written so far are whole, so a resume continues it.
+            let written = (|| -> Result<(), String> {
+                if k % output_interval == 0 || k == steps {
+                    // Written row by row: a killed run keeps every row it computed.
+                    series.append(&row(&r, world, true)).map_err(series_error)?;
+                }
+                if let Some(s) = &sections {
+                    write_sections(s, k, world, out).map_err(named_write_error)?;
+                }
+                if vtk_interval > 0 && (k % vtk_interval == 0 || k == steps) {
+                    vtk.write_frame(world).map_err(named_write_error)?;
+                }
+                if checkpoint_interval > 0 && k % checkpoint_interval == 0 && k != steps {
+                    let path = checkpoint_path(&ckpt_dir, k);
+                    write_checkpoint_with_stats(world, Some(stats), &path)
+                        .map_err(|e| write_error(&path, e))?;
+                    prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
+                }
+                Ok(())
+            })();
+            if let Err(e) = written {
+                observer.finish();
+                return Err(stopped(&e, k, out, names));
             }
             observer.step(k - start, &r);
             if observer.stop_requested() && world.step_index < steps {
@@ -828,13 +863,9 @@ impl Job {
                 OVERLAP_REPORT * 1e3
             ));
         }
-        series.flush().map_err(io)?;
-        write_checkpoint_with_stats(
-            world,
-            Some(stats),
-            &checkpoint_path(&ckpt_dir, world.step_index),
-        )
-        .map_err(io)?;
+        let last = checkpoint_path(&ckpt_dir, world.step_index);
+        write_checkpoint_with_stats(world, Some(stats), &last)
+            .map_err(|e| stopped(&write_error(&last, e), world.step_index, out, names))?;
         prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
         let summary = Summary::new(world, stats, o.threads);
         let finals = match last_indicators {
@@ -880,9 +911,49 @@ impl Job {
     }
 }
 
-/// The message of a run stopped by the health check: what diverged, and what is left.
-fn diverged(d: &Divergence, out: &Path, names: &ArgNames) -> Failure {
-    let kept = match list_checkpoints(&out.join("checkpoints"))
+/// Subdomains holding fewer grains than this on average cost more than they save. Measured
+/// on a settled pile of 1,000 grains at 100 sweeps a step (`ballast bench --scaling --sweeps
+/// 100`, one thread, `BENCHMARKS.md`): 2 subdomains make a step 16 % cheaper than monolithic
+/// NLGS, and the gain shrinks with the subdomains: 7 % at 8 grains each (11x11x1, 22 % of the
+/// contacts on the interface, the phase that scales worst with threads), 3 % at 3.9
+/// (16x16x1, 32 %); at 2 and 1 grain a step costs 5 % and 15 % more than monolithic (41 %,
+/// 50 % on the interface). More subdomains than grains are refused
+/// ([`DdmSettings::check_grains`]).
+pub const WARN_GRAINS_PER_SUBDOMAIN: usize = 10;
+
+/// A warning when the partition `dims` leaves fewer than [`WARN_GRAINS_PER_SUBDOMAIN`] of the
+/// `grains` per subdomain on average (none for a monolithic run): naming the option that set
+/// it (`by_option`) or `ddm.subdomains`, the value, the grains per subdomain and the largest
+/// partition advised. The run is unchanged: a decomposition changes speed, not validity.
+pub fn subdomain_warning(
+    dims: &[usize; 3],
+    grains: usize,
+    by_option: bool,
+    names: &ArgNames,
+) -> Option<String> {
+    let n: usize = dims.iter().product();
+    if n <= 1 || grains >= n.saturating_mul(WARN_GRAINS_PER_SUBDOMAIN) {
+        return None;
+    }
+    let [x, y, z] = *dims;
+    let name = if by_option {
+        format!("{} {x}x{y}x{z}", names.subdomains)
+    } else {
+        format!("ddm.subdomains = [{x}, {y}, {z}]")
+    };
+    Some(format!(
+        "warning: {name}: {n} subdomains for {grains} grains, {:.1} grains per subdomain on \
+         average; below {WARN_GRAINS_PER_SUBDOMAIN} a decomposition costs more than it saves \
+         (the run is slower than with fewer subdomains, same results): use at most {} \
+         subdomains here, or none (1x1x1)",
+        grains as f64 / n as f64,
+        (grains / WARN_GRAINS_PER_SUBDOMAIN).max(1)
+    ))
+}
+
+/// What a stopped run leaves in `out` to continue from: its last checkpoint, or none.
+fn kept_checkpoint(out: &Path, names: &ArgNames) -> String {
+    match list_checkpoints(&out.join("checkpoints"))
         .ok()
         .and_then(|l| l.last().cloned())
     {
@@ -891,7 +962,83 @@ fn diverged(d: &Divergence, out: &Path, names: &ArgNames) -> Failure {
             (names.resume)(out)
         ),
         None => "no checkpoint was written".into(),
-    };
+    }
+}
+
+/// The message of a run stopped by a write error (`error`, naming the file) after step
+/// `step`: a full disk or file size limit leaves whole rows and checkpoints, and the run
+/// continues from its last checkpoint once there is room again.
+fn stopped(error: &str, step: u64, out: &Path, names: &ArgNames) -> Failure {
+    Failure::Error(format!(
+        "{error}; the run is stopped after step {step} and {}",
+        kept_checkpoint(out, names)
+    ))
+}
+
+/// A write error's message, naming the file.
+fn write_error(path: &Path, e: std::io::Error) -> String {
+    format!("write error in {}: {e}", path.display())
+}
+
+/// A write error's message when the error names its file already ([`VtkWriter`], sections).
+fn named_write_error(e: std::io::Error) -> String {
+    format!("write error in {e}")
+}
+
+/// `series.csv` open for appending rows. Each row is written whole by one call (no buffer
+/// left to flush later), and a row that cannot be written whole (a full disk) is cut off
+/// again, so that the file ends with a whole row.
+struct SeriesFile {
+    file: std::fs::File,
+    /// Bytes of whole rows (and the header).
+    len: u64,
+}
+
+impl SeriesFile {
+    fn open(path: &Path) -> std::io::Result<Self> {
+        let file = std::fs::OpenOptions::new().append(true).open(path)?;
+        let len = file.metadata()?.len();
+        Ok(SeriesFile { file, len })
+    }
+
+    /// Appends `row` and a newline.
+    fn append(&mut self, row: &str) -> std::io::Result<()> {
+        let line = format!("{row}\n");
+        match self.file.write_all(line.as_bytes()) {
+            Ok(()) => {
+                self.len += line.len() as u64;
+                Ok(())
+            }
+            Err(e) => {
+                // Best effort: truncating needs no space.
+                let _ = self.file.set_len(self.len);
+                Err(e)
+            }
+        }
+    }
+}
+
+/// `series.csv` for a run resumed at step `step`: `header`, then the rows of `old` (the
+/// file the interrupted run left) up to that step. Whole rows only: a run killed in the middle
+/// of a row leaves it cut, perhaps in its step number.
+fn rows_up_to(old: &str, header: &str, step: u64) -> String {
+    let columns = header.split(',').count();
+    let mut text = format!("{header}\n");
+    for line in old.split_inclusive('\n').skip(1) {
+        let Some(row) = line.strip_suffix('\n') else {
+            break;
+        };
+        let at = row.split(',').next().and_then(|s| s.parse::<u64>().ok());
+        if row.split(',').count() == columns && at.is_some_and(|s| s <= step) {
+            text.push_str(line);
+        }
+    }
+    text
+}
+
+/// The message of a run stopped by the health check: what diverged, and what is left.
+fn diverged(d: &Divergence, out: &Path, names: &ArgNames) -> Failure {
+    let kept = kept_checkpoint(out, names);
     let advice = if d.step == 0 {
         "check the scenario's initial positions and velocities"
     } else {
@@ -973,8 +1120,8 @@ fn write_summary_and_report(
     observer: &mut dyn Observer,
 ) -> Result<(), String> {
     let json = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
-    write_atomic(&out.join("summary.json"), json.as_bytes())
-        .map_err(|e| format!("write error in {}: {e}", out.display()))?;
+    let path = out.join("summary.json");
+    write_atomic(&path, json.as_bytes()).map_err(|e| write_error(&path, e))?;
     if let Err(e) = write_run_report(out, Path::new(source), text, value) {
         observer.message(&format!("warning: report: {e}"));
     }
@@ -1012,10 +1159,11 @@ fn cycle_json(c: &ballast_railway::tamping::Cycle, blocks: &[usize]) -> serde_js
 fn write_sections(s: &Sections, k: u64, world: &World, out: &Path) -> std::io::Result<()> {
     for m in s.due(k) {
         let dir = out.join("sections");
-        std::fs::create_dir_all(&dir)?;
+        std::fs::create_dir_all(&dir).map_err(|e| naming(&dir, e))?;
         for p in &s.planes {
             let csv = section_csv(&s.points(world, p));
-            write_atomic(&dir.join(Sections::file_name(m, p)), csv.as_bytes())?;
+            let path = dir.join(Sections::file_name(m, p));
+            write_atomic(&path, csv.as_bytes()).map_err(|e| naming(&path, e))?;
         }
     }
     Ok(())
@@ -1030,6 +1178,18 @@ fn short(x: f64) -> String {
 
 #[cfg(test)]
 mod tests {
+    /// A resume keeps the whole rows up to its checkpoint: not a row cut by a kill or a full
+    /// disk (here in its step number: "1" of "13"), nor rows after the checkpoint.
+    #[test]
+    fn a_resume_keeps_whole_rows_up_to_its_checkpoint() {
+        let old = "step,a,b\n10,1,2\n11,1\n12,1,2\n13,1,2\n1";
+        assert_eq!(
+            super::rows_up_to(old, "step,a,b", 12),
+            "step,a,b\n10,1,2\n12,1,2\n"
+        );
+        assert_eq!(super::rows_up_to("", "step,a,b", 12), "step,a,b\n");
+    }
+
     #[test]
     fn lengths_in_messages_are_short() {
         assert_eq!(super::short(3.6000000000000005), "3.6");

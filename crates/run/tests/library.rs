@@ -182,3 +182,104 @@ fn refusals_name_the_front_ends_arguments() {
         .unwrap_err();
     assert!(e.to_string().contains("already at step 5"), "{e}");
 }
+
+/// `examples/pile.toml` (300 grains) with each `(from, to)` of `replace` applied.
+fn pile(replace: &[(&str, &str)]) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/pile.toml");
+    let mut text = std::fs::read_to_string(path).unwrap();
+    for (from, to) in replace {
+        assert!(text.contains(from), "{from}");
+        text = text.replacen(from, to, 1);
+    }
+    text
+}
+
+fn build_text(text: &str, subdomains: Option<[usize; 3]>, observer: &mut Recorder) -> Job {
+    let options = BuildOptions {
+        cache: None,
+        subdomains,
+        quiet: true,
+        names: &NAMES,
+    };
+    Job::build("pile.toml", text, &options, observer).unwrap()
+}
+
+fn digest(job: &Job) -> String {
+    ballast_engine::digest::state_digest(&job.world().bodies)
+}
+
+/// `Job::checked_step`, the health check of a front end that steps on its own (Python's
+/// `Simulation.step`): checked steps give the states unchecked ones do; a step that breaks a
+/// bound gives its divergence and puts the world and the statistics back to the step before,
+/// from which stepping on repeats that step bit for bit; a blow-up at the first step leaves the
+/// initial state.
+#[test]
+fn checked_steps_stop_at_the_last_healthy_step() {
+    let mut o = Recorder::default();
+    let text = pile(&[]);
+    let (mut checked, mut plain) = (
+        build_text(&text, None, &mut o),
+        build_text(&text, None, &mut o),
+    );
+    for _ in 0..40 {
+        let (a, b) = (checked.checked_step().unwrap(), plain.step());
+        assert_eq!((a.step, a.contacts), (b.step, b.contacts));
+    }
+    assert_eq!(digest(&checked), digest(&plain));
+
+    // Falling grains pass 0.05 m/s after 5.1 ms: step 26 at dt = 2e-4 s.
+    let slow = pile(&[("alert = 1e-3", "alert = 1e-3\nmax_speed = 0.05")]);
+    let mut job = build_text(&slow, None, &mut o);
+    let mut plain = build_text(&slow, None, &mut o);
+    let d = loop {
+        match job.checked_step() {
+            Ok(_) => plain.step(),
+            Err(d) => break d,
+        };
+    };
+    assert_eq!((d.step, d.quantity.name()), (26, "speed"), "{d}");
+    assert_eq!(job.world().step_index, 25);
+    assert_eq!(job.stats().steps, 25);
+    assert_eq!(digest(&job), digest(&plain));
+    job.step();
+    plain.step();
+    assert_eq!(digest(&job), digest(&plain));
+
+    let blow_up = pile(&[("gravity = [0, 0, -9.81]", "gravity = [0, 0, -1e200]")]);
+    let mut job = build_text(&blow_up, None, &mut o);
+    let initial = digest(&job);
+    let d = job.checked_step().unwrap_err();
+    assert_eq!(d.step, 1);
+    assert!(
+        d.to_string()
+            .contains("group \"grain\") moves at 2.000e196 m/s"),
+        "{d}"
+    );
+    assert_eq!((job.world().step_index, digest(&job)), (0, initial));
+}
+
+/// Subdomains of fewer than `WARN_GRAINS_PER_SUBDOMAIN` grains on average are warned, named by
+/// the option or the scenario key that set them; 300 grains take 30 subdomains without a word.
+#[test]
+fn small_subdomains_are_warned() {
+    let text = pile(&[]);
+    let mut o = Recorder::default();
+    build_text(&text, Some([5, 6, 1]), &mut o);
+    build_text(&text, Some([1, 1, 1]), &mut o);
+    assert_eq!(o.messages, Vec::<String>::new());
+    build_text(&text, Some([6, 6, 1]), &mut o);
+    let table = format!("{text}\n[ddm]\nsubdomains = [8, 4, 2]\n");
+    build_text(&table, None, &mut o);
+    assert_eq!(o.messages.len(), 2, "{:?}", o.messages);
+    for (m, name, n, per) in [
+        (&o.messages[0], "subdomains 6x6x1", 36, "8.3"),
+        (&o.messages[1], "ddm.subdomains = [8, 4, 2]", 64, "4.7"),
+    ] {
+        let head = format!(
+            "warning: {name}: {n} subdomains for 300 grains, {per} grains per subdomain on average"
+        );
+        assert!(m.starts_with(&head), "{m}");
+        assert!(m.contains("use at most 30 subdomains here"), "{m}");
+        assert_eq!(m.lines().count(), 1);
+    }
+}

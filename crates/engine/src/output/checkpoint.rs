@@ -76,7 +76,8 @@
 //!
 //! Checkpoints are named `checkpoint_<step:010>.bin` ([`checkpoint_path`]) and written through
 //! [`write_atomic`] (a `.tmp` file, then a rename), so a crash mid-write leaves the previous
-//! checkpoints intact and at worst a stray `.tmp` file, which is never read.
+//! checkpoints intact and at worst a stray `.tmp` file, which is never read (a resume deletes
+//! it: [`remove_partial_checkpoints`]; a write that fails, on a full disk, deletes its own).
 //! [`newest_valid_checkpoint`] resumes from the newest file that reads back valid, and
 //! [`prune_checkpoints`] keeps the newest few.
 
@@ -634,10 +635,24 @@ pub fn encode_checkpoint(world: &World, stats: Option<&RunStats>) -> Vec<u8> {
     let mut p = Enc::default();
     p.u64(fnv1a64(&scene.0));
     p.0.extend_from_slice(&scene.0);
+    encode_state(&mut p, world, stats);
 
+    let mut out = Enc(Vec::with_capacity(HEADER_LEN + p.0.len() + CHECKSUM_LEN));
+    out.0.extend_from_slice(MAGIC);
+    out.u32(FORMAT_VERSION);
+    out.len(p.0.len());
+    out.0.extend_from_slice(&p.0);
+    let sum = fnv1a64(&out.0);
+    out.u64(sum);
+    out.0
+}
+
+/// The state section of a checkpoint: clock, timers, body states, contacts, detection
+/// anchors, the run's origin and the statistics (everything after the scene).
+fn encode_state(p: &mut Enc, world: &World, stats: Option<&RunStats>) {
     p.f64(world.time);
     p.u64(world.step_index);
-    encode_timers(&mut p, &world.timers);
+    encode_timers(p, &world.timers);
 
     let b = &world.bodies;
     p.len(b.len());
@@ -695,15 +710,6 @@ pub fn encode_checkpoint(world: &World, stats: Option<&RunStats>) -> Vec<u8> {
             p.f64(s.max_penetration);
         }
     }
-
-    let mut out = Enc(Vec::with_capacity(HEADER_LEN + p.0.len() + CHECKSUM_LEN));
-    out.0.extend_from_slice(MAGIC);
-    out.u32(FORMAT_VERSION);
-    out.len(p.0.len());
-    out.0.extend_from_slice(&p.0);
-    let sum = fnv1a64(&out.0);
-    out.u64(sum);
-    out.0
 }
 
 /// Writes the checkpoint of `world` to `path` atomically (temporary file, then rename; see
@@ -743,6 +749,11 @@ pub fn write_checkpoint_with_stats(
 /// A decoded checkpoint, not yet applied to a world.
 struct Decoded {
     scene: Scene,
+    state: State,
+}
+
+/// A decoded state section ([`encode_state`]).
+struct State {
     time: f64,
     step_index: u64,
     timers: PhaseTimes,
@@ -826,15 +837,27 @@ fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
     if fnv1a64(&payload[scene_start..d.pos]) != fingerprint {
         return Err("the scene fingerprint does not match the scene section".into());
     }
+    let state = decode_state(&mut d, version, scene.bodies.len())?;
+    if d.pos != payload.len() {
+        return Err(format!(
+            "{} unread bytes after the last section",
+            payload.len() - d.pos
+        ));
+    }
+    Ok(Decoded { scene, state })
+}
+
+/// Reads a state section written by [`encode_state`] (in format `version`) for `bodies`
+/// bodies.
+fn decode_state(d: &mut Dec, version: u32, bodies: usize) -> DecResult<State> {
     let time = d.f64("time")?;
     let step_index = d.u64("step index")?;
-    let timers = decode_timers(&mut d)?;
+    let timers = decode_timers(d)?;
 
     let n = d.count(16 * 8, "body")?;
-    if n != scene.bodies.len() {
+    if n != bodies {
         return Err(format!(
-            "{n} body states for {} bodies in the scene section",
-            scene.bodies.len()
+            "{n} body states for {bodies} bodies in the scene section"
         ));
     }
     let position = d.vec(n, |d| d.vec3("position"))?;
@@ -845,7 +868,7 @@ fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
 
     let m = d.count(4 + 4 + 24 + 72 + 8 + 8 + 24 + 1 + 24, "contact")?;
     let mut c = ContactSet::default();
-    decode_contacts(&mut d, m, n, &mut c)?;
+    decode_contacts(d, m, n, &mut c)?;
 
     let anchors = match version {
         1 => None,
@@ -879,19 +902,12 @@ fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
         0 => None,
         1 => {
             let mut s = RunStats::default();
-            decode_stats(&mut d, &mut s)?;
+            decode_stats(d, &mut s)?;
             Some(s)
         }
         f => return Err(format!("statistics flag {f} is not 0 or 1")),
     };
-    if d.pos != payload.len() {
-        return Err(format!(
-            "{} unread bytes after the last section",
-            payload.len() - d.pos
-        ));
-    }
-    Ok(Decoded {
-        scene,
+    Ok(State {
         time,
         step_index,
         timers,
@@ -1010,7 +1026,7 @@ fn apply(d: Decoded, path: &Path, world: &mut World) -> Result<Option<RunStats>,
             what,
         });
     }
-    if let (Some(c), Some(w)) = (d.origin, world.origin_digest()) {
+    if let (Some(c), Some(w)) = (d.state.origin, world.origin_digest()) {
         if c != w {
             return Err(CheckpointError::SceneMismatch {
                 path: path.to_path_buf(),
@@ -1022,6 +1038,11 @@ fn apply(d: Decoded, path: &Path, world: &mut World) -> Result<Option<RunStats>,
             });
         }
     }
+    Ok(apply_state(d.state, world))
+}
+
+/// Replaces the state of `world` by `d` (of the same scene), returning its statistics.
+fn apply_state(d: State, world: &mut World) -> Option<RunStats> {
     let b = &mut world.bodies;
     b.position = d.position;
     b.orientation = d.orientation;
@@ -1042,7 +1063,58 @@ fn apply(d: Decoded, path: &Path, world: &mut World) -> Result<Option<RunStats>,
     }
     world.bodies.apply_releases(world.time);
     world.timers = d.timers;
-    Ok(d.stats)
+    d.stats
+}
+
+/// A world's state kept in memory, to put the same world back to it: what a checkpoint holds
+/// but the scene (the world is the one it was taken from), so no file, checksum or scene
+/// comparison. A front end that steps on takes one before each step, and puts the world back
+/// to it when the health check finds the step diverged.
+#[derive(Clone, Debug, Default)]
+pub struct Snapshot {
+    bytes: Vec<u8>,
+}
+
+impl Snapshot {
+    /// The state of `world` (and of the run statistics `stats`) now.
+    pub fn take(world: &World, stats: Option<&RunStats>) -> Self {
+        let mut s = Snapshot::default();
+        s.retake(world, stats);
+        s
+    }
+
+    /// [`Snapshot::take`] into this snapshot, reusing its memory (one step to the next).
+    pub fn retake(&mut self, world: &World, stats: Option<&RunStats>) {
+        let mut e = Enc(std::mem::take(&mut self.bytes));
+        e.0.clear();
+        encode_state(&mut e, world, stats);
+        self.bytes = e.0;
+    }
+
+    /// Puts `world` back to the state taken (stepping on then gives bit-identically what it
+    /// gave from there), returning the statistics taken with it. `world` must be the world
+    /// the snapshot was taken from, between two steps (not [`World::is_detected`]); a world
+    /// with another number of bodies is refused and left unchanged.
+    pub fn restore(&self, world: &mut World) -> Result<Option<RunStats>, String> {
+        let mut d = Dec {
+            bytes: &self.bytes,
+            pos: 0,
+            base: 0,
+        };
+        let state = decode_state(&mut d, FORMAT_VERSION, world.bodies.len())
+            .map_err(|e| format!("snapshot: {e}"))?;
+        Ok(apply_state(state, world))
+    }
+
+    /// Bytes held.
+    pub fn len(&self) -> usize {
+        self.bytes.len()
+    }
+
+    /// Whether nothing was taken yet.
+    pub fn is_empty(&self) -> bool {
+        self.bytes.is_empty()
+    }
 }
 
 /// Reads the checkpoint at `path` into `world`, which must be built from the same scenario
@@ -1144,14 +1216,14 @@ pub fn newest_valid_checkpoint(
     let mut skipped = Vec::new();
     for (step, path) in files.into_iter().rev() {
         let loaded = load(&path).and_then(|d| {
-            if d.step_index == step {
+            if d.state.step_index == step {
                 Ok(d)
             } else {
                 Err(CheckpointError::Corrupted {
                     path: path.clone(),
                     reason: Corruption::Malformed(format!(
                         "the file name says step {step} but the contents are at step {}",
-                        d.step_index
+                        d.state.step_index
                     )),
                 })
             }
@@ -1171,6 +1243,25 @@ pub fn newest_valid_checkpoint(
         resumed: None,
         skipped,
     })
+}
+
+/// Deletes the temporary files of checkpoint writes cut short in `dir` (`checkpoint_*.tmp`,
+/// left by a run killed while writing one; never read, but each as large as a checkpoint),
+/// returning the paths removed.
+pub fn remove_partial_checkpoints(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut removed = Vec::new();
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        let partial = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_some_and(|n| n.starts_with("checkpoint_") && n.ends_with(".tmp"));
+        if partial {
+            std::fs::remove_file(&path)?;
+            removed.push(path);
+        }
+    }
+    Ok(removed)
 }
 
 /// Deletes all but the `keep` newest checkpoint files in `dir` (at least one is always kept),

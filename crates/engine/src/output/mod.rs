@@ -149,15 +149,27 @@ impl Summary {
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same folder and a rename, so a
-/// crash never leaves a half-written file.
+/// crash never leaves a half-written file. A write that fails (a full disk) deletes its
+/// temporary file, giving back the space it took, and leaves any previous file at `path` as
+/// it was.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let tmp = path.with_extension("tmp");
-    {
+    let written = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
         f.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
     }
-    std::fs::rename(&tmp, path)
+    written
+}
+
+/// `e` with its message prefixed by `path` (`DIR/vtk/grains_000003.vtu: File too large`), for
+/// writers of several files whose caller cannot tell which one failed.
+pub fn naming(path: &Path, e: std::io::Error) -> std::io::Error {
+    std::io::Error::new(e.kind(), format!("{}: {e}", path.display()))
 }
 
 /// Header of `series.csv` (units in brackets).

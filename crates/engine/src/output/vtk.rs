@@ -37,7 +37,7 @@
 //! almost nothing, so a frame is several times smaller than raw doubles. Connectivity and
 //! offsets are Int32 unless a file needs more.
 
-use super::write_atomic;
+use super::{naming, write_atomic};
 use crate::bodies::BodyKind;
 use crate::laws::ContactStatus;
 use crate::math::{DMat3, DVec3};
@@ -86,7 +86,8 @@ impl VtkWriter {
     /// files are replaced at the first [`write_frame`](Self::write_frame); use
     /// [`resume`](Self::resume) to continue them.
     pub fn new(dir: &Path) -> io::Result<Self> {
-        std::fs::create_dir_all(dir.join(SUBDIR))?;
+        let sub = dir.join(SUBDIR);
+        std::fs::create_dir_all(&sub).map_err(|e| naming(&sub, e))?;
         Ok(Self {
             dir: dir.to_path_buf(),
             series: Default::default(),
@@ -102,7 +103,8 @@ impl VtkWriter {
     ///
     /// # Errors
     ///
-    /// I/O errors, and [`io::ErrorKind::InvalidData`] for a `.pvd` this writer cannot parse.
+    /// I/O errors, and [`io::ErrorKind::InvalidData`] for a `.pvd` this writer cannot parse;
+    /// every error of this writer names its file.
     pub fn resume(dir: &Path, up_to_time: f64) -> io::Result<Self> {
         let mut writer = Self::new(dir)?;
         for (k, name) in SERIES.iter().enumerate() {
@@ -113,7 +115,9 @@ impl VtkWriter {
                 let f = &dropped.file;
                 if f.starts_with("vtk/") && f.ends_with(".vtu") && !f.contains("..") {
                     match std::fs::remove_file(dir.join(f)) {
-                        Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(e),
+                        Err(e) if e.kind() != io::ErrorKind::NotFound => {
+                            return Err(naming(&dir.join(f), e))
+                        }
                         _ => {}
                     }
                 }
@@ -150,10 +154,11 @@ impl VtkWriter {
             };
             let path = self.dir.join(&file);
             match k {
-                0 => write_bodies(&path, world, false)?,
-                1 => write_bodies(&path, world, true)?,
-                _ => write_contacts(&path, world)?,
+                0 => write_bodies(&path, world, false),
+                1 => write_bodies(&path, world, true),
+                _ => write_contacts(&path, world),
             }
+            .map_err(|e| naming(&path, e))?;
             // Listed only once written, so a failed write never reaches a `.pvd`.
             if new {
                 self.series[k].push(Frame { time, file });
@@ -187,7 +192,8 @@ impl VtkWriter {
             );
         }
         text += "  </Collection>\n</VTKFile>\n";
-        write_atomic(&self.pvd_path(name), text.as_bytes())
+        let path = self.pvd_path(name);
+        write_atomic(&path, text.as_bytes()).map_err(|e| naming(&path, e))
     }
 }
 
@@ -196,7 +202,7 @@ fn read_pvd(path: &Path) -> io::Result<Vec<Frame>> {
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(e),
+        Err(e) => return Err(naming(path, e)),
     };
     let bad = |what: &str| {
         io::Error::new(
