@@ -246,6 +246,17 @@ def test_run_refuses_bad_arguments_naming_them(tmp_path):
         ballast.Simulation.from_toml(scenario).run(tmp_path / "a", steps=5, resume=True)
 
 
+def test_run_into_a_folder_that_cannot_be_made_raises_oserror(tmp_path):
+    # A file where the folder's parent should be: refused by the file system, even for root.
+    (tmp_path / "file").write_text("not a folder")
+    out = tmp_path / "file" / "run"
+    sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "sliding_block.toml"))
+    with pytest.raises(OSError, match=r"cannot create output folder .*file/run") as e:
+        sim.run(out, steps=10, quiet=True)
+    assert not isinstance(e.value, ValueError)
+    assert sim.step_index == 0
+
+
 def test_run_stopped_by_the_health_check_raises(tmp_path):
     text = block_on_slab(0.5, 0.0).replace("gravity = [0.0, 0.0, -9.81]", "gravity = [0, 0, -1e200]")
     assert "1e200" in text

@@ -334,7 +334,7 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(Failure::Error(e)) => {
+        Err(Failure::Error(e) | Failure::Io(e)) => {
             eprintln!("error: {}", cut_lines(&e));
             ExitCode::FAILURE
         }

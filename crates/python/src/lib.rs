@@ -25,6 +25,17 @@ fn value_error(e: impl ToString) -> PyErr {
     PyValueError::new_err(e.to_string())
 }
 
+/// A [`Failure`] of the run library as the Python exception of its kind (a diverged or
+/// interrupted run is raised by `Simulation.run`, which sees the observer's exception too).
+fn failure_error(f: Failure) -> PyErr {
+    match f {
+        Failure::Io(m) => PyIOError::new_err(m),
+        Failure::Diverged(m) => DivergedError::new_err(m),
+        Failure::Interrupted(m) => PyKeyboardInterrupt::new_err(m),
+        Failure::Error(m) => value_error(m),
+    }
+}
+
 /// `(n, 3)` array of vectors.
 fn vec3_array<'py>(py: Python<'py>, v: &[DVec3]) -> Bound<'py, PyArray2<f64>> {
     let flat: Vec<f64> = v.iter().flat_map(|x| x.to_array()).collect();
@@ -69,7 +80,7 @@ fn build(source: &str, text: &str, cache: Option<&Path>) -> PyResult<Simulation>
         quiet: true,
         names: &NAMES,
     };
-    let job = Job::build(source, text, &options, &mut Plain).map_err(value_error)?;
+    let job = Job::build(source, text, &options, &mut Plain).map_err(failure_error)?;
     Ok(Simulation { job, vtk: None })
 }
 
@@ -291,9 +302,7 @@ impl Simulation {
             (_, Some(e)) => Err(e),
             (Ok(o), None) => serde_json::to_string(&o.summary)
                 .map_err(|e| PyRuntimeError::new_err(e.to_string())),
-            (Err(Failure::Diverged(m)), None) => Err(DivergedError::new_err(m)),
-            (Err(Failure::Interrupted(m)), None) => Err(PyKeyboardInterrupt::new_err(m)),
-            (Err(Failure::Error(m)), None) => Err(value_error(m)),
+            (Err(f), None) => Err(failure_error(f)),
         }
     }
 

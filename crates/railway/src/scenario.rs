@@ -44,7 +44,6 @@ use crate::tamping::{Cycle, TampingSpec};
 use crate::track::TrackSpec;
 use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, DdmSettings, SolverSettings};
 use ballast_engine::world::{StepSettings, World};
-use ballast_engine::ScenarioError;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -486,10 +485,10 @@ impl TrackScenario {
             "m",
         )?;
         // The engine's settings name their table already ("solver.tolerance = …").
-        self.solver.validate().map_err(ScenarioError)?;
-        self.correction.validate().map_err(ScenarioError)?;
+        self.solver.validate()?;
+        self.correction.validate()?;
         if let Some(d) = &self.ddm {
-            d.validate().map_err(ScenarioError)?;
+            d.validate()?;
         }
         Ok(())
     }

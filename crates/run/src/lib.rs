@@ -9,8 +9,8 @@
 //!   run into a folder ([`Job::run`]);
 //! * [`Observer`]: progress, messages and stop requests between steps, supplied by the front
 //!   end ([`Plain`]: messages on stderr, no progress, no stop);
-//! * [`Failure`]: an error, a run stopped by the health check, or an interrupted run (the
-//!   command's exit codes 1, 3 and 130);
+//! * [`Failure`]: bad input, a file that cannot be written, a run stopped by the health check,
+//!   or an interrupted run (the command's exit codes 1, 1, 3 and 130);
 //! * [`report`] and [`charts`]: `report.md` and its figures, drawn with `plotters`.
 //!
 //! The folder's files (`scenario.toml`, `series.csv`, `summary.json`, `report.md`, `plots/`,

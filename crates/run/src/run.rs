@@ -41,8 +41,14 @@ const OVERLAP_LINES: u64 = 20;
 /// Why a run did not finish.
 #[derive(Debug)]
 pub enum Failure {
-    /// Bad input or an I/O error (the command's exit code 1).
+    /// Bad input: a scenario, setting or flag refused, or a folder that is not this run's
+    /// (the command's exit code 1).
     Error(String),
+    /// A file that cannot be written or read (a full disk, a file size limit, a folder
+    /// without permission): the message names the file; rows and checkpoints written before
+    /// are whole, so the run continues from its last checkpoint once the cause is removed
+    /// (exit code 1).
+    Io(String),
     /// The health check stopped a diverging run (exit code 3); its outputs are written.
     Diverged(String),
     /// A stop was requested ([`Observer::stop_requested`]: Ctrl-C or SIGTERM on the command
@@ -54,7 +60,9 @@ impl Failure {
     /// The message, whatever the kind of failure.
     pub fn message(&self) -> &str {
         match self {
-            Failure::Error(m) | Failure::Diverged(m) | Failure::Interrupted(m) => m,
+            Failure::Error(m) | Failure::Io(m) | Failure::Diverged(m) | Failure::Interrupted(m) => {
+                m
+            }
         }
     }
 }
@@ -299,18 +307,18 @@ fn previous_run(out: &Path) -> Vec<String> {
 /// Makes `out` a folder that belongs to the run about to start: refused when it holds another
 /// run's files (its checkpoints would be resumed, its rows mixed with the new ones), unless
 /// `overwrite`, which deletes exactly the files a run writes ([`RUN_FILES`]) and nothing else.
-fn claim_folder(out: &Path, overwrite: bool, names: &ArgNames) -> Result<(), String> {
+fn claim_folder(out: &Path, overwrite: bool, names: &ArgNames) -> Result<(), Failure> {
     let found = previous_run(out);
     if !found.is_empty() {
         if !overwrite {
-            return Err(format!(
+            return Err(Failure::Error(format!(
                 "{}: the folder holds another run ({}); continue it with {}, write to another \
                  folder, or add {} to delete that run's files first",
                 (names.out)(out),
                 found.join(", "),
                 (names.resume_command)(out),
                 names.overwrite
-            ));
+            )));
         }
         for name in RUN_FILES {
             let p = out.join(name);
@@ -321,12 +329,21 @@ fn claim_folder(out: &Path, overwrite: bool, names: &ArgNames) -> Result<(), Str
             } else {
                 Ok(())
             };
-            removed
-                .map_err(|e| format!("{}: cannot delete {}: {e}", names.overwrite, p.display()))?;
+            removed.map_err(|e| {
+                Failure::Io(format!(
+                    "{}: cannot delete {}: {e}",
+                    names.overwrite,
+                    p.display()
+                ))
+            })?;
         }
     }
-    std::fs::create_dir_all(out)
-        .map_err(|e| format!("cannot create output folder {}: {e}", out.display()))
+    std::fs::create_dir_all(out).map_err(|e| {
+        Failure::Io(format!(
+            "cannot create output folder {}: {e}",
+            out.display()
+        ))
+    })
 }
 
 /// The scenario of a `ballast run` (file, preset, or the run folder's copy when resuming):
@@ -400,13 +417,14 @@ pub fn run(a: &RunArgs, observer: &mut dyn Observer) -> Result<RunOutcome, Failu
 impl Job {
     /// Builds the scene of scenario `text` (an engine scenario, or a track scenario: its bed
     /// prepared, or read from `o.cache`); `source` names where the text came from (a file,
-    /// `preset NAME`) in messages and in the report.
+    /// `preset NAME`) in messages and in the report. A refused scenario is
+    /// [`Failure::Error`], its message naming the field, the value and what is allowed.
     pub fn build(
         source: &str,
         text: &str,
         o: &BuildOptions,
         observer: &mut dyn Observer,
-    ) -> Result<Job, String> {
+    ) -> Result<Job, Failure> {
         let job = if is_track_scenario(text) {
             Self::build_track(source, text, o, observer)?
         } else {
@@ -660,7 +678,7 @@ impl Job {
         }
         let steps = o.steps.unwrap_or(self.steps);
         let sections = track.as_ref().map(|t| t.sections(steps));
-        let io = |e: std::io::Error| format!("write error in {}: {e}", out.display());
+        let io = |e: std::io::Error| Failure::Io(format!("write error in {}: {e}", out.display()));
         let series_path = out.join("series.csv");
         let series_error = |e: std::io::Error| write_error(&series_path, e);
         let ckpt_dir = out.join("checkpoints");
@@ -824,7 +842,7 @@ impl Job {
             }
             // What the step writes. A write that fails (a full disk) stops the run here: the
             // rows and checkpoints written so far are whole, so a resume continues it.
-            let written = (|| -> Result<(), String> {
+            let written = (|| -> Result<(), Failure> {
                 if k % output_interval == 0 || k == steps {
                     // Written row by row: a killed run keeps every row it computed.
                     series.append(&row(&r, world, true)).map_err(series_error)?;
@@ -845,7 +863,7 @@ impl Job {
             })();
             if let Err(e) = written {
                 observer.finish();
-                return Err(stopped(&e, k, out, names));
+                return Err(stopped(e.message(), k, out, names));
             }
             observer.step(k - start, &r);
             if observer.stop_requested() && world.step_index < steps {
@@ -864,8 +882,14 @@ impl Job {
             ));
         }
         let last = checkpoint_path(&ckpt_dir, world.step_index);
-        write_checkpoint_with_stats(world, Some(stats), &last)
-            .map_err(|e| stopped(&write_error(&last, e), world.step_index, out, names))?;
+        write_checkpoint_with_stats(world, Some(stats), &last).map_err(|e| {
+            stopped(
+                write_error(&last, e).message(),
+                world.step_index,
+                out,
+                names,
+            )
+        })?;
         prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
         let summary = Summary::new(world, stats, o.threads);
         let finals = match last_indicators {
@@ -969,20 +993,20 @@ fn kept_checkpoint(out: &Path, names: &ArgNames) -> String {
 /// `step`: a full disk or file size limit leaves whole rows and checkpoints, and the run
 /// continues from its last checkpoint once there is room again.
 fn stopped(error: &str, step: u64, out: &Path, names: &ArgNames) -> Failure {
-    Failure::Error(format!(
+    Failure::Io(format!(
         "{error}; the run is stopped after step {step} and {}",
         kept_checkpoint(out, names)
     ))
 }
 
-/// A write error's message, naming the file.
-fn write_error(path: &Path, e: std::io::Error) -> String {
-    format!("write error in {}: {e}", path.display())
+/// A write error, naming the file.
+fn write_error(path: &Path, e: std::io::Error) -> Failure {
+    Failure::Io(format!("write error in {}: {e}", path.display()))
 }
 
-/// A write error's message when the error names its file already ([`VtkWriter`], sections).
-fn named_write_error(e: std::io::Error) -> String {
-    format!("write error in {e}")
+/// A write error whose error names its file already ([`VtkWriter`], sections).
+fn named_write_error(e: std::io::Error) -> Failure {
+    Failure::Io(format!("write error in {e}"))
 }
 
 /// `series.csv` open for appending rows. Each row is written whole by one call (no buffer
@@ -1118,7 +1142,7 @@ fn write_summary_and_report(
     text: &str,
     value: &serde_json::Value,
     observer: &mut dyn Observer,
-) -> Result<(), String> {
+) -> Result<(), Failure> {
     let json = serde_json::to_string_pretty(value).map_err(|e| e.to_string())?;
     let path = out.join("summary.json");
     write_atomic(&path, json.as_bytes()).map_err(|e| write_error(&path, e))?;

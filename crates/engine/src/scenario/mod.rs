@@ -551,10 +551,10 @@ impl Scenario {
                 ));
             }
         }
-        self.solver.validate().map_err(ScenarioError)?;
-        self.correction.validate().map_err(ScenarioError)?;
+        self.solver.validate()?;
+        self.correction.validate()?;
         if let Some(d) = &self.ddm {
-            d.validate().map_err(ScenarioError)?;
+            d.validate()?;
         }
         for (name, rho) in &self.materials {
             if !(rho.is_finite() && *rho > 0.0) {

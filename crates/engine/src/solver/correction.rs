@@ -15,6 +15,7 @@
 
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use crate::math::{DMat3, DVec3};
+use crate::ScenarioError;
 use serde::{Deserialize, Serialize};
 
 /// Settings of the overlap correction.
@@ -62,21 +63,24 @@ pub(crate) fn infinite_if_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result
 
 impl CorrectionSettings {
     /// Checks every field; the error names it.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ScenarioError> {
         if !(0.0..=1.0).contains(&self.fraction) {
-            return Err(format!(
+            return Err(ScenarioError(format!(
                 "correction.fraction = {} must be in [0, 1]",
                 self.fraction
-            ));
+            )));
         }
         if !(self.slop.is_finite() && self.slop >= 0.0) {
-            return Err(format!("correction.slop = {} must be ≥ 0 m", self.slop));
+            return Err(ScenarioError(format!(
+                "correction.slop = {} must be ≥ 0 m",
+                self.slop
+            )));
         }
         if self.max_push.is_nan() || self.max_push <= 0.0 {
-            return Err(format!(
+            return Err(ScenarioError(format!(
                 "correction.max_push = {} must be > 0 m (inf: no limit)",
                 self.max_push
-            ));
+            )));
         }
         Ok(())
     }
@@ -320,7 +324,7 @@ mod tests {
                 ..Default::default()
             };
             let e = s.validate().unwrap_err();
-            assert!(e.contains("correction.max_push"), "{e}");
+            assert!(e.0.contains("correction.max_push"), "{e}");
         }
         let s = CorrectionSettings::default();
         assert!(s.validate().is_ok());

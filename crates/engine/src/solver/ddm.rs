@@ -30,6 +30,7 @@ use super::nlgs::{Nlgs, SolveReport, SweepSums};
 use super::partition::{Balance, Partition, STATIC};
 use super::StopRule;
 use crate::laws::ContactStatus;
+use crate::ScenarioError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
@@ -86,12 +87,12 @@ pub const MIN_GRAINS_PER_SUBDOMAIN: usize = 1;
 
 impl DdmSettings {
     /// Checks every field; the error names it.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ScenarioError> {
         if self.subdomains.iter().any(|&n| n == 0 || n > 4096) {
-            return Err(format!(
+            return Err(ScenarioError(format!(
                 "ddm.subdomains = {:?}: each must be in 1..=4096",
                 self.subdomains
-            ));
+            )));
         }
         if self.inner_sweeps == 0 {
             return Err("ddm.inner_sweeps = 0 must be ≥ 1".into());
@@ -105,15 +106,15 @@ impl DdmSettings {
     /// Refuses more subdomains than `grains` (the dynamic bodies they split): an empty
     /// subdomain only costs its bookkeeping, and 4096 × 4096 of them for 300 grains made a
     /// run 280 times slower. At least [`MIN_GRAINS_PER_SUBDOMAIN`] grains each, on average.
-    pub fn check_grains(&self, grains: usize) -> Result<(), String> {
+    pub fn check_grains(&self, grains: usize) -> Result<(), ScenarioError> {
         let n: usize = self.subdomains.iter().product();
         if n > 1 && n.saturating_mul(MIN_GRAINS_PER_SUBDOMAIN) > grains {
-            return Err(format!(
+            return Err(ScenarioError(format!(
                 "subdomains = {} ({n} subdomains) for {grains} grains: at most {} \
                  ({MIN_GRAINS_PER_SUBDOMAIN} grain(s) per subdomain on average)",
                 self.label(),
                 grains / MIN_GRAINS_PER_SUBDOMAIN
-            ));
+            )));
         }
         Ok(())
     }

@@ -27,6 +27,7 @@ pub use nlgs::{Nlgs, SolveReport};
 pub use partition::{Balance, Partition};
 pub use problem::{BlockMatrix, ContactProblem, GlobalProblem, HBlock};
 
+use crate::ScenarioError;
 use serde::{Deserialize, Serialize};
 
 /// The convergence measure used to stop NLGS.
@@ -178,27 +179,30 @@ impl StopRule {
 
 impl SolverSettings {
     /// Checks every field; the error names it, with the value and what is allowed.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ScenarioError> {
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return Err(format!("solver.tolerance = {} must be > 0", self.tolerance));
+            return Err(ScenarioError(format!(
+                "solver.tolerance = {} must be > 0",
+                self.tolerance
+            )));
         }
         if self.max_iterations == 0 {
             return Err("solver.max_iterations = 0 must be ≥ 1".into());
         }
         if !(self.relaxation > 0.0 && self.relaxation <= 1.0) {
-            return Err(format!(
+            return Err(ScenarioError(format!(
                 "solver.relaxation = {} must be in (0, 1]",
                 self.relaxation
-            ));
+            )));
         }
         if self.check_every == 0 {
             return Err("solver.check_every = 0 must be ≥ 1".into());
         }
         if self.residual_tolerance.is_nan() || self.residual_tolerance <= 0.0 {
-            return Err(format!(
+            return Err(ScenarioError(format!(
                 "solver.residual_tolerance = {} must be > 0 (inf: the stop norm alone decides)",
                 self.residual_tolerance
-            ));
+            )));
         }
         Ok(())
     }
