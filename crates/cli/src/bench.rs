@@ -34,14 +34,17 @@ pub struct Measured {
     pub sweeps: f64,
     /// Σ contacts × sweeps over the NLGS time.
     pub updates_per_s: f64,
+    /// Steps that missed the solver's tolerance.
+    pub not_converged: u64,
 }
 
 /// Times `steps` steps of `world` (≥ 1).
 pub fn measure(world: &mut ballast_engine::world::World, steps: u64) -> Measured {
     let before = world.timers;
-    let (mut contacts, mut sweeps, mut updates) = (0u64, 0u64, 0u64);
+    let (mut contacts, mut sweeps, mut updates, mut not_converged) = (0u64, 0u64, 0u64, 0u64);
     for _ in 0..steps {
         let r = world.step();
+        not_converged += u64::from(!r.solve.converged);
         contacts += r.contacts as u64;
         sweeps += r.solve.iterations as u64;
         updates += (r.contacts * r.solve.iterations) as u64;
@@ -53,6 +56,7 @@ pub fn measure(world: &mut ballast_engine::world::World, steps: u64) -> Measured
         contacts: contacts as f64 / n,
         sweeps: sweeps as f64 / n,
         updates_per_s: updates as f64 / times.nlgs.max(1e-12),
+        not_converged,
     }
 }
 

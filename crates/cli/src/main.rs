@@ -2,6 +2,7 @@
 
 mod bench;
 mod interrupt;
+mod paper;
 mod progress;
 mod scaling;
 
@@ -74,9 +75,9 @@ enum Command {
         /// Steps of settling before measuring.
         #[arg(long, default_value_t = 1500)]
         settle_steps: u64,
-        /// Measured steps.
-        #[arg(long, default_value_t = 100)]
-        steps: u64,
+        /// Measured steps (default: 100; 5 with --paper).
+        #[arg(long, value_parser = parse_steps)]
+        steps: Option<u64>,
         /// Worker threads (default: 1, the single-thread figure the target is stated for).
         #[arg(long, default_value_t = 1)]
         threads: usize,
@@ -104,6 +105,20 @@ enum Command {
         /// 2/threads; scheduling only, results are unchanged).
         #[arg(long, default_value_t = ballast_engine::MIN_PARALLEL_CONTACTS)]
         min_parallel_contacts: usize,
+        /// The paper's computation instead: prepares the paper preset's bed (or reads it from
+        /// --cache), then times --steps cycle steps at the paper's 740 fixed sweeps and at the
+        /// preset's tolerance stop, on 1 thread and on all threads (--thread-counts).
+        #[arg(long, conflicts_with = "scaling")]
+        paper: bool,
+        /// With --paper: the track scenario benched (a preset name or a scenario file).
+        #[arg(long, default_value = "paper", requires = "paper")]
+        bed: String,
+        /// With --paper: cache folder of prepared beds (default: as `ballast run`).
+        #[arg(long, requires = "paper")]
+        cache: Option<PathBuf>,
+        /// With --paper: no progress messages on stderr.
+        #[arg(long)]
+        quiet: bool,
         /// Scaling study: detection reuse distance in m (the scenario key
         /// `simulation.reuse_distance`; 0 = every pair detected anew each step).
         #[arg(long, default_value_t = ballast_engine::world::default_reuse_distance(), value_parser = parse_reuse_distance)]
@@ -297,6 +312,34 @@ fn main() -> ExitCode {
             }),
         Command::Bench {
             json,
+            steps,
+            paper: true,
+            bed,
+            cache,
+            thread_counts,
+            quiet,
+            ..
+        } => {
+            let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+            let mut counts = if thread_counts.is_empty() {
+                vec![1, cores]
+            } else {
+                thread_counts
+            };
+            counts.dedup();
+            paper::paper(&paper::PaperArgs {
+                bed: &bed,
+                cache: cache.or_else(default_cache).as_deref(),
+                json: json.as_deref(),
+                steps: steps.unwrap_or(5),
+                thread_counts: &counts,
+                quiet,
+            })
+            .map(|_| ())
+            .map_err(Failure::Error)
+        }
+        Command::Bench {
+            json,
             grains,
             settle_steps,
             steps,
@@ -312,7 +355,7 @@ fn main() -> ExitCode {
             json: json.as_deref(),
             grains: grains[0],
             settle_steps,
-            steps,
+            steps: steps.unwrap_or(100),
             partitions: &partitions,
             sweeps,
             packing: packing.as_deref(),
@@ -329,7 +372,15 @@ fn main() -> ExitCode {
             threads,
             ..
         } => set_threads(Some(threads))
-            .and_then(|t| bench::bench(json.as_deref(), &grains, settle_steps, steps, t))
+            .and_then(|t| {
+                bench::bench(
+                    json.as_deref(),
+                    &grains,
+                    settle_steps,
+                    steps.unwrap_or(100),
+                    t,
+                )
+            })
             .map_err(Failure::Error),
     };
     match result {

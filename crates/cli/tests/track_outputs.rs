@@ -966,3 +966,104 @@ fn track_run_writes_sections_through_the_bed() {
         figures::check(&plots, &name, &["z (m)", "speed (m/s)"]);
     }
 }
+
+/// `ballast bench --paper` on this file's bed (read from the fixture's cache): the contract's
+/// JSON, exactly 740 sweeps per step at the paper's stop, at most the scenario's cap at its
+/// tolerance stop, the same work on 1 and 2 threads, and the preparation's recorded time.
+#[test]
+fn paper_bench_times_the_cycle_at_740_sweeps_and_at_the_tolerance_stop() {
+    let r = runs();
+    let root = r.chained.parent().unwrap();
+    let json = root.join("paper.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_ballast"))
+        .args(["bench", "--paper", "--quiet", "--steps", "2"])
+        .args(["--thread-counts", "1,2", "--bed"])
+        .arg(root.join("track.toml"))
+        .arg("--cache")
+        .arg(root.join("cache"))
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("ms/step") && stdout.contains("tolerance"),
+        "{stdout}"
+    );
+    let v: Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let cases = v["cases"].as_array().unwrap();
+    let order: Vec<(&str, u64)> = cases
+        .iter()
+        .map(|c| (c["stop"].as_str().unwrap(), c["threads"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(
+        order,
+        [("740", 1), ("740", 2), ("tolerance", 1), ("tolerance", 2)]
+    );
+    let prep = summary(&r.straight).unwrap()["preparation"]["wall_s"]
+        .as_f64()
+        .unwrap();
+    let grains = summary(&r.straight).unwrap()["preparation"]["grains"]
+        .as_u64()
+        .unwrap();
+    let cap = r.scenario.solver.max_iterations as f64;
+    for c in cases {
+        for key in [
+            "name",
+            "grains",
+            "threads",
+            "contact_points",
+            "ms_per_step",
+            "sweeps_per_step",
+            "contact_updates_per_s",
+            "stop",
+            "preparation_s",
+            "peak_rss_bytes",
+            "timings_s",
+        ] {
+            assert!(!c[key].is_null(), "{key} missing in {c}");
+        }
+        for key in [
+            "detection",
+            "nlgs",
+            "subdomains",
+            "interface",
+            "other",
+            "total",
+        ] {
+            assert!(c["timings_s"][key].as_f64().unwrap() >= 0.0, "{c}");
+        }
+        assert_eq!(c["grains"].as_u64().unwrap(), grains);
+        assert_eq!(c["preparation_s"].as_f64().unwrap(), prep);
+        assert!(c["contact_points"].as_f64().unwrap() > grains as f64, "{c}");
+        assert!(c["ms_per_step"].as_f64().unwrap() > 0.0, "{c}");
+        assert!(c["peak_rss_bytes"].as_u64().unwrap() > 1 << 20, "{c}");
+        let sweeps = c["sweeps_per_step"].as_f64().unwrap();
+        if c["stop"] == "740" {
+            assert_eq!(sweeps, 740.0, "{c}");
+            assert_eq!(c["steps_not_converged"].as_u64().unwrap(), 2, "{c}");
+        } else {
+            assert!(sweeps >= 1.0 && sweeps <= cap, "{c}");
+        }
+    }
+    // Thread counts time the same work.
+    for pair in cases.chunks(2) {
+        for key in ["contact_points", "sweeps_per_step", "steps_not_converged"] {
+            assert_eq!(pair[0][key], pair[1][key], "{key}: {pair:?}");
+        }
+    }
+    let bad = Command::new(env!("CARGO_BIN_EXE_ballast"))
+        .args(["bench", "--paper", "--bed", "no-such-preset", "--quiet"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && err.contains("--bed no-such-preset"),
+        "{err}"
+    );
+}
