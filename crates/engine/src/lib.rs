@@ -5,7 +5,7 @@
 //!
 //! 1. [`bodies`]: rigid bodies (structure of arrays), mass properties, kinematic drivers;
 //! 2. [`shapes`]: convex polyhedra and half-spaces, their hull and mass properties;
-//! 3. [`detection`]: broad phase (uniform grid) and narrow phase (contact manifolds ≤ 4 points);
+//! 3. `detection`: broad phase (uniform grid) and narrow phase (contact manifolds ≤ 4 points);
 //! 4. [`contacts`]: contact points with local frames `(n, t, s)`, persistence for warm start;
 //! 5. [`laws`]: the Signorini-Coulomb law, friction table and the exact local 3×3 solver;
 //! 6. [`solver`]: Delassus blocks and Non-Linear Gauss-Seidel (NLGS);
@@ -20,6 +20,8 @@
 
 pub mod bodies;
 pub mod contacts;
+// Internals exposed for the crate's tests and benches; not part of the supported API.
+#[doc(hidden)]
 pub mod detection;
 pub mod digest;
 pub mod error;

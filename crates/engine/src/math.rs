@@ -5,13 +5,13 @@ pub use glam::{DMat3, DQuat, DVec3};
 /// A right-handed orthonormal frame `(n, t, s)` built from a unit normal, deterministically
 /// (Duff et al.'s branchless construction, as in glam's `any_orthonormal_pair`).
 #[inline]
-pub fn frame_from_normal(n: DVec3) -> (DVec3, DVec3) {
+pub(crate) fn frame_from_normal(n: DVec3) -> (DVec3, DVec3) {
     n.any_orthonormal_pair()
 }
 
 /// Skew-symmetric cross-product matrix `[a×]` such that `[a×] b = a × b`.
 #[inline]
-pub fn skew(a: DVec3) -> DMat3 {
+pub(crate) fn skew(a: DVec3) -> DMat3 {
     DMat3::from_cols(
         DVec3::new(0.0, a.z, -a.y),
         DVec3::new(-a.z, 0.0, a.x),
@@ -31,7 +31,7 @@ pub struct Sym3 {
 impl Sym3 {
     /// The symmetric part `(m + mᵀ)/2` of `m`.
     #[inline]
-    pub fn from_mat(m: DMat3) -> Self {
+    pub(crate) fn from_mat(m: DMat3) -> Self {
         Sym3 {
             e: [
                 m.x_axis.x,
@@ -46,7 +46,7 @@ impl Sym3 {
 
     /// The first diagonal entry (`W_nn` of a Delassus block).
     #[inline(always)]
-    pub fn xx(self) -> f64 {
+    pub(crate) fn xx(self) -> f64 {
         self.e[0]
     }
 

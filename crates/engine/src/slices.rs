@@ -3,7 +3,7 @@
 
 /// Splits `s` into consecutive pieces of the given `lengths` (in order); returns the pieces
 /// and what is left after them. Panics if the lengths add up to more than `s.len()`.
-pub fn split_lengths<T>(
+pub(crate) fn split_lengths<T>(
     mut s: &mut [T],
     lengths: impl IntoIterator<Item = usize>,
 ) -> (Vec<&mut [T]>, &mut [T]) {

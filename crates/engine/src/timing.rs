@@ -47,7 +47,7 @@ impl std::ops::Sub for PhaseTimes {
 }
 
 /// A running stopwatch returning elapsed seconds since the last lap.
-pub struct Lap(Instant);
+pub(crate) struct Lap(Instant);
 
 impl Lap {
     /// Starts the stopwatch.
@@ -55,7 +55,7 @@ impl Lap {
         Lap(Instant::now())
     }
     /// Seconds since start or the previous lap.
-    pub fn lap(&mut self) -> f64 {
+    pub(crate) fn lap(&mut self) -> f64 {
         let now = Instant::now();
         let s = (now - self.0).as_secs_f64();
         self.0 = now;

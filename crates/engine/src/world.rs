@@ -48,7 +48,7 @@ pub struct StepSettings {
     /// Normal stiffness of a contact point (N/m); `None`: rigid contacts (Moreau-Jean's
     /// Signorini law). With a stiffness the normal law is the rate form of an elastic contact:
     /// over a step the normal force changes by `k` times the approach `h uₙ` (see
-    /// [`crate::solver::nlgs`]), so forces in a jammed, hyperstatic packing are those of stiff
+    /// [`crate::solver::Nlgs`]), so forces in a jammed, hyperstatic packing are those of stiff
     /// elastic grains instead of any of the rigid law's unbounded set of self-stresses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
@@ -229,7 +229,7 @@ impl World {
     }
 
     /// The driver of body `i` if it is a force-limited driven body this step.
-    pub fn force_limited(&self, i: usize) -> Option<&crate::bodies::Driver> {
+    pub(crate) fn force_limited(&self, i: usize) -> Option<&crate::bodies::Driver> {
         force_limited(&self.bodies, i)
     }
 

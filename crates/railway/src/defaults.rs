@@ -8,12 +8,12 @@ use ballast_engine::solver::DdmSettings;
 /// already cover each body's own motion: 0.4 mm rather than 1 mm leaves 16 % fewer contacts
 /// (fewer idle ones) with the same overlaps (their 99th and 99.9th percentiles) on the
 /// default cycle; see BENCHMARKS.md.
-pub const DEFAULT_ALERT: f64 = 4e-4;
+pub(crate) const DEFAULT_ALERT: f64 = 4e-4;
 
 /// The default job's domain decomposition: 2 × 2 contact-balanced boxes (along and across the
 /// track), more subdomains than the 2 cores this job is sized for. The split depends on the
 /// scene alone, so results are the same on any number of threads.
-pub fn default_ddm() -> DdmSettings {
+pub(crate) fn default_ddm() -> DdmSettings {
     DdmSettings {
         subdomains: [2, 2, 1],
         ..DdmSettings::default()

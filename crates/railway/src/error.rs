@@ -45,7 +45,7 @@ pub struct FieldError {
 }
 
 /// A [`FieldError`] for `field` holding `value`.
-pub fn refuse(field: &str, value: impl std::fmt::Debug, allowed: &str) -> FieldError {
+pub(crate) fn refuse(field: &str, value: impl std::fmt::Debug, allowed: &str) -> FieldError {
     FieldError {
         field: field.into(),
         value: format!("{value:?}"),
@@ -54,7 +54,13 @@ pub fn refuse(field: &str, value: impl std::fmt::Debug, allowed: &str) -> FieldE
 }
 
 /// Checks that `v` is finite and in `[lo, hi]`.
-pub fn check_range(field: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<(), FieldError> {
+pub(crate) fn check_range(
+    field: &str,
+    v: f64,
+    lo: f64,
+    hi: f64,
+    unit: &str,
+) -> Result<(), FieldError> {
     if v.is_finite() && v >= lo && v <= hi {
         Ok(())
     } else {

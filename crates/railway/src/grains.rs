@@ -142,7 +142,7 @@ impl GrainSpec {
     }
 
     /// The engine's shape parameters for these grains.
-    pub fn params(&self) -> GrainParams {
+    pub(crate) fn params(&self) -> GrainParams {
         GrainParams {
             vertices_min: self.vertices[0],
             vertices_max: self.vertices[1],

@@ -13,14 +13,14 @@
 //! * [`indicators`]: compacity, block heights, tine forces, coordination through a run;
 //! * [`sections`]: vertical sections through the bed at chosen moments (speed, load);
 //! * [`scenario`]: track scenario files and the `default` and `paper` presets;
-//! * [`defaults`]: the engine settings the scenario and the preparation share;
+//! * `defaults`: the engine settings the scenario and the preparation share;
 //! * [`error`]: [`Error`], what the scenario and preparation calls return, and [`FieldError`].
 //!
 //! Conventions: SI units except sieve sizes, given in millimetres as in the standards; the
 //! sieve size of a grain is its volume-equivalent diameter (see [`grading`]).
 
 pub mod compacity;
-pub mod defaults;
+mod defaults;
 pub mod error;
 pub mod grading;
 pub mod grains;

@@ -31,7 +31,7 @@
 //! [ddm]
 //! ```
 
-pub use crate::defaults::{default_ddm, DEFAULT_ALERT};
+use crate::defaults::{default_ddm, DEFAULT_ALERT};
 use crate::error::{check_range, refuse, Error, FieldError};
 use crate::grading::{GradingCurve, GradingTable};
 use crate::grains::GrainSpec;
@@ -521,7 +521,7 @@ impl TrackScenario {
     }
 
     /// The engine's step settings.
-    pub fn step_settings(&self) -> StepSettings {
+    pub(crate) fn step_settings(&self) -> StepSettings {
         StepSettings {
             dt: self.simulation.dt,
             theta: self.simulation.theta,

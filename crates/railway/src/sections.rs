@@ -22,7 +22,7 @@ use std::ops::Range;
 
 /// Half thickness of the slab around a section plane (m): about half a mean ballast grain,
 /// so that each grain cut by the plane appears once and the picture stays one grain deep.
-pub const SLAB_HALF_WIDTH: f64 = 0.02;
+pub(crate) const SLAB_HALF_WIDTH: f64 = 0.02;
 
 /// Which vertical plane a section is.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -124,12 +124,12 @@ impl Default for TampingSpec {
 /// Default [`TampingSpec::squeeze_force`] (N per tine): 7.8 kN per pair of picks, the
 /// squeezing force found best for bed stiffness and sleeper support in a DEM–MBD study of
 /// three-sleeper tamping (Tiedao Xuebao, 2024), shared by the pair's two picks.
-pub const DEFAULT_SQUEEZE_FORCE: f64 = 3900.0;
+pub(crate) const DEFAULT_SQUEEZE_FORCE: f64 = 3900.0;
 
 /// Default [`TampingSpec::insertion_force`] (N per tine): a tamping unit of about 2 t pressed
 /// down on its 8 tines, plus its vertical cylinder (an estimate; the literature gives
 /// insertion speeds rather than forces).
-pub const DEFAULT_INSERTION_FORCE: f64 = 5000.0;
+pub(crate) const DEFAULT_INSERTION_FORCE: f64 = 5000.0;
 
 /// One tine of the built cycle.
 #[derive(Clone, Debug, PartialEq)]

@@ -163,7 +163,7 @@ impl BodySet {
     /// shared). Contact detection reads the topology of bodies with nearby numbers together;
     /// shapes allocated in another order (generated, then renumbered along the track) scatter
     /// those reads over the heap, and they miss the caches. Changes no value.
-    pub fn compact_shapes(&mut self) {
+    pub(crate) fn compact_shapes(&mut self) {
         let mut done: std::collections::HashMap<*const ConvexPolyhedron, Arc<ConvexPolyhedron>> =
             std::collections::HashMap::new();
         for s in &mut self.shape {
@@ -179,7 +179,7 @@ impl BodySet {
     /// Turns the kinematic bodies whose driver's `release_at` is ≤ `t` into dynamic ones. Their
     /// angular momentum is already `I_w ω` (the update keeps it so for driven bodies), so this
     /// only changes the kind and is idempotent: a resumed run calls it again bit-identically.
-    pub fn apply_releases(&mut self, t: f64) {
+    pub(crate) fn apply_releases(&mut self, t: f64) {
         for i in 0..self.len() {
             if self.kind[i] == BodyKind::Kinematic
                 && self.driver[i].as_ref().is_some_and(|d| d.released(t))
@@ -190,7 +190,7 @@ impl BodySet {
     }
 
     /// The kind body `i` was created with: a released body reports `Kinematic`.
-    pub fn scene_kind(&self, i: usize) -> BodyKind {
+    pub(crate) fn scene_kind(&self, i: usize) -> BodyKind {
         match (&self.driver[i], self.kind[i]) {
             (Some(d), BodyKind::Dynamic) if d.release_at.is_some() => BodyKind::Kinematic,
             (_, k) => k,
@@ -209,7 +209,7 @@ impl BodySet {
     }
 
     /// World inverse inertia tensor `R I⁻¹ Rᵀ`, zero for non-dynamic bodies.
-    pub fn inv_inertia_world(&self, i: usize) -> DMat3 {
+    pub(crate) fn inv_inertia_world(&self, i: usize) -> DMat3 {
         if self.kind[i] != BodyKind::Dynamic {
             return DMat3::ZERO;
         }

@@ -86,7 +86,7 @@ impl ContactSet {
     /// allocation, no serial copy). A point replays the matching of its pair's earlier points
     /// to know which old contacts they took: a pair has at most a few points, so this costs
     /// less than grouping the pairs would.
-    pub fn rebuild(
+    pub(crate) fn rebuild(
         &mut self,
         raw: &[RawContact],
         bodies: &BodySet,

@@ -38,7 +38,7 @@ impl Aabb {
 
 /// Reusable broad-phase buffers.
 #[derive(Default, Debug)]
-pub struct BroadPhase {
+pub(crate) struct BroadPhase {
     /// The boxes, candidates and pairs of the last call (see [`BroadPhase::update_pairs`]).
     last_aabbs: Vec<Aabb>,
     last_candidates: Vec<u32>,
@@ -73,7 +73,7 @@ impl BroadPhase {
     /// pass runs instead on the first call, when the candidates differ, when `same_skip` is
     /// false (the skip rule changed since the last call), or when the changed boxes times the
     /// candidates exceed `INCREMENTAL_TESTS` box tests.
-    pub fn update_pairs(
+    pub(crate) fn update_pairs(
         &mut self,
         aabbs: &[Aabb],
         candidates: &[u32],
@@ -141,7 +141,7 @@ impl BroadPhase {
     /// Appends to `pairs` every `(i, j)`, `i < j`, whose boxes overlap, among the bodies
     /// `candidates`, skipping pairs for which `skip(i, j)` is true (e.g. two fixed bodies).
     /// `pairs` is sorted on return.
-    pub fn find_pairs(
+    pub(crate) fn find_pairs(
         &mut self,
         aabbs: &[Aabb],
         candidates: &[u32],

@@ -29,7 +29,7 @@ use rayon::prelude::*;
 
 /// Anchor poses of every body, and which were re-anchored by the last update.
 #[derive(Clone, Debug, Default)]
-pub struct Anchors {
+pub(crate) struct Anchors {
     /// Anchor positions (centre of mass).
     pub position: Vec<DVec3>,
     /// Anchor orientations.

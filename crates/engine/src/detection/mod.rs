@@ -3,12 +3,15 @@
 //! the manifolds of pairs whose bodies have barely moved reused from the previous step (see
 //! [`coherence`]).
 
-pub mod broad;
+mod broad;
 pub mod coherence;
+// Narrow-phase routines, exposed for the crate's tests and benches; not part of the supported
+// API.
+#[doc(hidden)]
 pub mod narrow;
 
-pub use broad::{Aabb, BroadPhase};
-pub use coherence::Anchors;
+pub(crate) use broad::{Aabb, BroadPhase};
+pub(crate) use coherence::Anchors;
 pub use narrow::{FaceHint, Manifold, ManifoldPoint, WorldPolyhedron};
 
 use crate::bodies::{BodyKind, BodySet};
@@ -135,13 +138,13 @@ impl Detector {
     }
 
     /// The anchor poses (see [`coherence`]), stored in checkpoints.
-    pub fn anchors(&self) -> &Anchors {
+    pub(crate) fn anchors(&self) -> &Anchors {
         &self.anchors
     }
 
     /// Restores anchor poses saved with [`Detector::anchors`] (a resumed run): the first
     /// detection then computes at these anchors what the interrupted run had cached.
-    pub fn set_anchors(&mut self, position: Vec<DVec3>, orientation: Vec<DQuat>) {
+    pub(crate) fn set_anchors(&mut self, position: Vec<DVec3>, orientation: Vec<DQuat>) {
         self.anchors = Anchors {
             position,
             orientation,

@@ -98,7 +98,7 @@ pub const MAGIC: &[u8; 11] = b"BALLASTCKPT";
 pub const FORMAT_VERSION: u32 = 4;
 /// The oldest format version this build still reads (version 1 has no anchor poses: a run
 /// resumed from it detects every pair anew at its first step).
-pub const OLDEST_VERSION: u32 = 1;
+pub(crate) const OLDEST_VERSION: u32 = 1;
 /// Magic, version, payload length.
 const HEADER_LEN: usize = 11 + 4 + 8;
 const CHECKSUM_LEN: usize = 8;

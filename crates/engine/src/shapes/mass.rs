@@ -141,6 +141,7 @@ impl MassProperties {
 /// much); the first two eigenvectors have their largest-magnitude component positive
 /// (first such component on ties); the third is their cross product, so `R` is a proper rotation
 /// (`det R = +1`).
+#[doc(hidden)] // exposed for the crate's tests; not part of the supported API
 pub fn symmetric_eigen(a: &DMat3) -> (DVec3, DMat3) {
     let cols = a.to_cols_array_2d(); // cols[j][i] = A_ij
     let mut m = [[0.0f64; 3]; 3];

@@ -99,7 +99,7 @@ pub struct Overlap {
 
 /// A body's solver copy with zero velocities (its inverse masses kept; its inverse inertia
 /// too when the correction may rotate it, otherwise zero).
-pub fn at_rest(b: &SolverBody, rotation: bool) -> SolverBody {
+pub(crate) fn at_rest(b: &SolverBody, rotation: bool) -> SolverBody {
     SolverBody {
         v: DVec3::ZERO,
         w: DVec3::ZERO,
@@ -143,7 +143,7 @@ pub fn overlaps(
 /// One projected Gauss-Seidel sweep over `rows` (in order):
 /// `p_α ← max(0, p_α + (b_α − ũₙ,α) / W_α,nn)`, the pseudo-velocities updated at once
 /// (`W_α,nn` without its inertia terms when the pseudo bodies have none, see [`at_rest`]).
-pub fn sweep<B: BodyAccess + ?Sized>(
+pub(crate) fn sweep<B: BodyAccess + ?Sized>(
     locals: &[LocalProblem],
     rows: &mut [Overlap],
     pseudo: &mut B,

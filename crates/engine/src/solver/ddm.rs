@@ -1,6 +1,6 @@
 //! Domain-decomposed NLGS: the paper's Algorithm 1 (DDM–OpenMP–NLGS), on rayon.
 //!
-//! With the primal partition ([`super::partition`]) the contacts split into subdomain contacts
+//! With the primal partition ([`super::Partition`]) the contacts split into subdomain contacts
 //! (both bodies in subdomain E, or one of them static) and interface contacts Γ (two dynamic
 //! bodies of different subdomains). Subdomains share no body (`W_EE' = 0`, eq. 11), so:
 //!
@@ -201,7 +201,7 @@ impl DdmProblem {
 
     /// [`DdmProblem::build`] into the buffers of a previous step (no reallocation once they
     /// have grown); the subdomains' buckets are filled in parallel, each in the caller's order.
-    pub fn rebuild(
+    pub(crate) fn rebuild(
         &mut self,
         partition: &Partition,
         locals: &[LocalProblem],

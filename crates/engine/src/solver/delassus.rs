@@ -43,7 +43,7 @@ pub struct LocalProblem {
     /// Current impulse `(r_n, r_t, r_s)`.
     pub r: DVec3,
     /// Normal impulse the contact carried at the end of the previous step (0 for a new
-    /// contact): the memory of the compliant normal law (see [`super::nlgs`]).
+    /// contact): the memory of the compliant normal law (see [`super::Nlgs`]).
     pub r_prev: f64,
 }
 
@@ -73,7 +73,7 @@ impl SolverBody {
     /// Whether impulses change this body's velocities (a dynamic body, or a force-limited
     /// driven one).
     #[inline]
-    pub fn writable(&self) -> bool {
+    pub(crate) fn writable(&self) -> bool {
         self.inv_mass > 0.0 || self.inv_inertia != DMat3::ZERO
     }
 }
@@ -115,7 +115,7 @@ impl LocalProblem {
 }
 
 /// `W = Eᵀ [ (m₁⁻¹ + m₂⁻¹) 1 − [r₁×] I₁⁻¹ [r₁×] − [r₂×] I₂⁻¹ [r₂×] ] E`.
-pub fn delassus_block(
+pub(crate) fn delassus_block(
     e: &[DVec3; 3],
     r1: DVec3,
     r2: DVec3,
@@ -135,7 +135,7 @@ pub fn delassus_block(
 /// body whose velocities body `i` takes (itself, or the body it is a rigid part of; empty:
 /// every body is itself): a contact on an attached part acts on that body, with the lever arm
 /// from its centre of mass.
-pub fn build_local_problems(
+pub(crate) fn build_local_problems(
     contacts: &ContactSet,
     warm_start: bool,
     bodies: &BodySet,

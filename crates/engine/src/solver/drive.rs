@@ -84,7 +84,7 @@ impl DriveRows {
     }
 
     /// `Σ_d residual_d²` of this body's rows at the current state (m²/s², rad²/s²).
-    pub fn residual2<B: BodyAccess + ?Sized>(&self, v: &B) -> f64 {
+    pub(crate) fn residual2<B: BodyAccess + ?Sized>(&self, v: &B) -> f64 {
         let b = v.body(self.body);
         let row = |lam: f64, w: f64, u: f64, bound: f64| {
             // ρ = 1/w: (λ − proj(λ − ρ u)) / ρ = w λ − w proj(λ − u / w).
@@ -112,7 +112,7 @@ impl DriveRows {
     }
 
     /// `Σ_d (u_d − c_d)²` on the free velocities: this body's share of the residual's scale.
-    pub fn scale2<B: BodyAccess + ?Sized>(&self, v: &B) -> f64 {
+    pub(crate) fn scale2<B: BodyAccess + ?Sized>(&self, v: &B) -> f64 {
         let b = v.body(self.body);
         let mut s = 0.0;
         if self.translate {
@@ -140,7 +140,7 @@ pub fn sweep<B: BodyAccess + ?Sized>(drives: &mut [DriveRows], v: &mut B) -> Swe
 }
 
 /// `Σ residual²` over the drives.
-pub fn residual_sum<B: BodyAccess + ?Sized>(drives: &[DriveRows], v: &B) -> f64 {
+pub(crate) fn residual_sum<B: BodyAccess + ?Sized>(drives: &[DriveRows], v: &B) -> f64 {
     drives.iter().map(|d| d.residual2(v)).sum()
 }
 

@@ -11,13 +11,21 @@
 //! `W` is never assembled off its diagonal blocks: the solver keeps `V = V_free + M⁻¹ H r`
 //! current, so `u_α` is read from the two bodies' velocities at any time.
 
+// Internals exposed for the crate's tests, benches and the railway studies (local problems,
+// subdomain solves, correction passes, drive rows); not part of the supported API, which is
+// re-exported below.
+#[doc(hidden)]
 pub mod correction;
+#[doc(hidden)]
 pub mod ddm;
+#[doc(hidden)]
 pub mod delassus;
+#[doc(hidden)]
 pub mod drive;
-pub mod nlgs;
+mod nlgs;
+#[doc(hidden)]
 pub mod partition;
-pub mod problem;
+mod problem;
 
 pub use correction::CorrectionSettings;
 pub use ddm::DdmSettings;
@@ -96,7 +104,7 @@ impl Default for SolverSettings {
 }
 
 /// Default [`SolverSettings::residual_tolerance`]: a relative natural-map residual of 1e-3.
-pub const DEFAULT_RESIDUAL_TOLERANCE: f64 = 1e-3;
+pub(crate) const DEFAULT_RESIDUAL_TOLERANCE: f64 = 1e-3;
 
 /// The stopping rule of NLGS and of the DDM iterations (see [`SolverSettings`]): the stop
 /// norm, then the natural-map residual, checked with a growing interval while it fails.

@@ -85,7 +85,7 @@ impl std::ops::AddAssign for SweepSums {
 
 impl SweepSums {
     /// Quad norm from the sums (0 when nothing is loaded).
-    pub fn quad(&self) -> f64 {
+    pub(crate) fn quad(&self) -> f64 {
         if self.wr2 > 0.0 {
             (self.dwr2 / self.wr2).sqrt()
         } else {
@@ -97,7 +97,7 @@ impl SweepSums {
 impl Nlgs {
     /// Updates contact α (step 2 of the algorithm) and returns its status.
     #[inline(always)]
-    pub fn update_contact<B: BodyAccess + ?Sized>(
+    pub(crate) fn update_contact<B: BodyAccess + ?Sized>(
         &self,
         c: &mut LocalProblem,
         v: &mut B,
@@ -160,7 +160,7 @@ impl Nlgs {
     /// `uₙ + c (rₙ − r̄ₙ)`; an open contact with no impulse contributes nothing, one with an
     /// impulse `‖W_nn r‖`.
     #[inline]
-    pub fn residual2<B: BodyAccess + ?Sized>(&self, c: &LocalProblem, v: &B) -> f64 {
+    pub(crate) fn residual2<B: BodyAccess + ?Sized>(&self, c: &LocalProblem, v: &B) -> f64 {
         let mut u = c.velocity(v);
         u.x += self.compliance * (c.r.x - c.r_prev);
         // ρ = 1/W_nn makes `r − ρ u` consistent in units (N·s); dividing by ρ gives m/s.
@@ -198,7 +198,7 @@ impl Nlgs {
 
     /// Sweep `k` (1-based) of a solve: forward, or with [`SolverSettings::symmetric`] every
     /// even sweep backward.
-    pub fn sweep_k<B: BodyAccess + ?Sized>(
+    pub(crate) fn sweep_k<B: BodyAccess + ?Sized>(
         &self,
         k: usize,
         locals: &mut [LocalProblem],
@@ -216,7 +216,11 @@ impl Nlgs {
     }
 
     /// `Σ_α ‖residual_α‖²` over `locals` (see [`ConvergenceNorm::NaturalMap`]).
-    pub fn residual_sum<B: BodyAccess + ?Sized>(&self, locals: &[LocalProblem], v: &B) -> f64 {
+    pub(crate) fn residual_sum<B: BodyAccess + ?Sized>(
+        &self,
+        locals: &[LocalProblem],
+        v: &B,
+    ) -> f64 {
         locals.iter().map(|c| self.residual2(c, v)).sum()
     }
 
@@ -234,7 +238,7 @@ impl Nlgs {
 
     /// [`Nlgs::solve`] with force-limited drives: each sweep runs the contacts in order, then
     /// the drives' rows ([`super::drive`]). The drive impulses are left in `drives`.
-    pub fn solve_with_drives(
+    pub(crate) fn solve_with_drives(
         &self,
         locals: &mut [LocalProblem],
         drives: &mut [DriveRows],

@@ -13,7 +13,7 @@
 //! Signorini-Coulomb law on `(W, q, μ)` is the engine's law, so any solver of that standard
 //! problem (Siconos' and LMGC90's included) solves the step's contacts.
 //!
-//! With a contact stiffness `k` (the compliant normal law of [`super::nlgs`]), the law
+//! With a contact stiffness `k` (the compliant normal law of [`super::Nlgs`]), the law
 //! `uₙ + c (rₙ − r̄ₙ) ≥ 0` with `c = 1/(k h²)` and `r̄ₙ` the previous step's normal impulse is
 //! folded in the same way: `c` is added to every diagonal block's normal entry and `−c r̄ₙ` to
 //! `qₙ`, so the standard problem on `(W, q, μ)` is again the engine's.
@@ -29,7 +29,7 @@
 //! drive rows are not part of this problem (FCLIB has no such rows): with drives, `q` is the
 //! free velocity of the contacts with the drive impulses left at zero.
 
-use super::delassus::{BodyAccess, LocalProblem, SolverBody};
+use super::delassus::{LocalProblem, SolverBody};
 use super::nlgs::SolveReport;
 use super::{SolverSettings, StopRule};
 use crate::laws::coulomb::{natural_map_residual, solve_local_from};
@@ -110,7 +110,7 @@ impl ContactProblem {
     /// `v_free` (the solver bodies before any impulse), with the gap-prediction factor
     /// `h_theta = h θ` and the normal compliance `compliance` (0: rigid). Deterministic:
     /// blocks are summed in body order.
-    pub fn assemble(
+    pub(crate) fn assemble(
         locals: &[LocalProblem],
         v_free: &[SolverBody],
         h_theta: f64,
@@ -345,7 +345,7 @@ pub struct GlobalProblem {
 impl GlobalProblem {
     /// The global form of `problem`, the contact problem of `locals` on `v_free` (see
     /// [`ContactProblem::assemble`]).
-    pub fn assemble(
+    pub(crate) fn assemble(
         locals: &[LocalProblem],
         v_free: &[SolverBody],
         problem: &ContactProblem,
@@ -432,10 +432,4 @@ impl GlobalProblem {
         }
         u
     }
-}
-
-/// `u = Hᵀ V` of every local problem at the velocities `v` (no gap shift): the matrix-free
-/// counterpart of [`ContactProblem::velocity`].
-pub fn local_velocities<B: BodyAccess + ?Sized>(locals: &[LocalProblem], v: &B) -> Vec<DVec3> {
-    locals.iter().map(|c| c.velocity(v)).collect()
 }
