@@ -138,6 +138,10 @@ pub struct World {
     /// `Σ λ · v̄` over the steps, with `v̄ = θ v⁺ + (1 − θ) v⁻` the velocity the update moves
     /// the body with (translation and rotation).
     pub(crate) drive_work: Vec<(u32, f64)>,
+    /// How far each force-limited translation lags behind its program (m, world axes), by
+    /// driven body, in body order: `Σ h (p̄ − (v̄ − s̄))` over the steps, with `p̄`, `s̄` the
+    /// program's and the superposed velocities weighted like `v̄`.
+    pub(crate) drive_lag: Vec<(u32, DVec3)>,
     /// The force-limited drives of the last step: rebuilt by every step, kept as its result
     /// (their impulses are the machine's forces).
     drives: Vec<DriveRows>,
@@ -191,6 +195,7 @@ impl World {
             origin: None,
             detector: Detector::default(),
             drive_work: Vec::new(),
+            drive_lag: Vec::new(),
             drives: Vec::new(),
             scratch: Scratch::default(),
         }
@@ -262,6 +267,13 @@ impl World {
         self.drive_work
             .binary_search_by_key(&(i as u32), |&(b, _)| b)
             .map_or(0.0, |k| self.drive_work[k].1)
+    }
+
+    /// How far (m, per world axis) the force-limited drive of body `i` lags behind its
+    /// program: the program's displacement since t = 0 less the body's, the superposed
+    /// motion taken out (zero for a drive that never yielded, and for other bodies).
+    pub fn drive_lag(&self, i: usize) -> DVec3 {
+        lag_of(&self.drive_lag, i)
     }
 
     /// The partition of this step: boxes over the dynamic bodies' centres, weighted by
@@ -441,7 +453,21 @@ impl World {
         self.drives.clear();
         for i in 0..b.len() {
             if let Some(d) = force_limited(b, i) {
-                let (target_v, target_w) = d.velocity(t1);
+                let (mut target_v, target_w) = d.velocity(t1);
+                if !d.catch_up_speed.iter().all(|&c| c == 0.0) {
+                    // The lag left once this step's share of the velocity it starts with
+                    // (beyond its program) is counted: `R = L − h (1 − θ) e₀`.
+                    let t0 = self.time;
+                    let excess = b.velocity[i] - d.program_velocity(t0).0 - d.superposed.at(t0).0;
+                    let left = lag_of(&self.drive_lag, i) - excess * (h * (1.0 - s.theta));
+                    let inv_mass = self.scratch.solver_bodies[i].inv_mass;
+                    for k in 0..3 {
+                        let c = d.catch_up_speed[k];
+                        if c > 0.0 && d.max_force[k].is_finite() {
+                            target_v[k] += catch_up(left[k], c, d.max_force[k] * inv_mass, h);
+                        }
+                    }
+                }
                 self.drives.push(DriveRows {
                     body: i as u32,
                     target_v,
@@ -567,6 +593,20 @@ impl World {
                 Ok(k) => self.drive_work[k].1 += work,
                 Err(k) => self.drive_work.insert(k, (d.body, work)),
             }
+            if d.translate {
+                let (t0, t1) = (self.time, self.time + h);
+                let driver = self.bodies.driver[i]
+                    .as_ref()
+                    .expect("a drive has a driver");
+                let bar = |(a, b): (DVec3, DVec3)| a * theta + b * (1.0 - theta);
+                let pbar = bar((driver.program_velocity(t1).0, driver.program_velocity(t0).0));
+                let sbar = bar((driver.superposed.at(t1).0, driver.superposed.at(t0).0));
+                let step_lag = (pbar - (vbar - sbar)) * h;
+                match self.drive_lag.binary_search_by_key(&d.body, |&(b, _)| b) {
+                    Ok(k) => self.drive_lag[k].1 += step_lag,
+                    Err(k) => self.drive_lag.insert(k, (d.body, step_lag)),
+                }
+            }
         }
         times.nlgs += lap.lap();
         let free_w = &self.scratch.free_w;
@@ -647,6 +687,29 @@ pub fn initial_state_digest(bodies: &BodySet) -> u64 {
         }
     }
     h
+}
+
+/// The velocity beyond its program with which a position servo makes up the lag `left` (m,
+/// this step's share of the velocity it starts with already counted), with `accel` = F/m the
+/// drive's own braking: in θ-steps the lag left evolves as `R ← R − h e` with `e` the excess
+/// velocity at the end of the step, and braking from `e` by `a h` a step consumes
+/// `max(0, e (e − a h) / (2a))` more; the largest `e` that can still stop on the program's
+/// position is `R/h` when `|R| ≤ a h²` (it stops the next step: the lag is made up in two
+/// steps, exactly, whatever θ), else `a (√(h²/4 + 2|R|/a) − h/2)`; no faster than `speed`.
+fn catch_up(left: f64, speed: f64, accel: f64, h: f64) -> f64 {
+    let r = left.abs();
+    let e = if r <= accel * h * h {
+        r / h
+    } else {
+        accel * ((0.25 * h * h + 2.0 * r / accel).sqrt() - 0.5 * h)
+    };
+    e.min(speed).copysign(left)
+}
+
+/// The lag of body `i` in `lags` (sorted by body), zero when absent.
+fn lag_of(lags: &[(u32, DVec3)], i: usize) -> DVec3 {
+    lags.binary_search_by_key(&(i as u32), |&(b, _)| b)
+        .map_or(DVec3::ZERO, |k| lags[k].1)
 }
 
 /// The driver of body `i` if it is driven (not yet released) with a force limit.

@@ -678,8 +678,9 @@ fn checkpoints_cover_all_state_fields() {
             "timers",
             // the digest of the run's initial state
             "origin",
-            // the work each drive has done so far
+            // the work each drive has done so far, and how far it lags behind its program
             "drive_work",
+            "drive_lag",
             // its anchor poses (the rest of it is rebuilt every step)
             "detector",
             // from the scenario
@@ -729,32 +730,33 @@ fn checkpoints_cover_all_state_fields() {
     );
 }
 
-/// Version 1, 2 and 3 files (written before the detection's anchor poses, the run's origin,
-/// resp. the drives' work were stored) still read: a version 1 run resumes with every body
-/// anchored anew at its first step, versions 1 and 2 are not checked against the initial
-/// state, and the drives start from no work done. The same bytes labelled an older version
+/// Version 1 to 4 files (written before the detection's anchor poses, the run's origin, the
+/// drives' work, resp. their lag were stored) still read: a version 1 run resumes with every
+/// body anchored anew at its first step, versions 1 and 2 are not checked against the initial
+/// state, and the drives start from no work done and no lag. The same bytes labelled an older version
 /// with the newer sections left in are refused as malformed, not misread.
 #[test]
 fn older_version_files_still_read() {
     let s = scenario();
     let mut w = build(&s);
     run(&mut w, SPLIT, &mut RunStats::default());
-    let v4 = encode_checkpoint(&w, None);
+    let v5 = encode_checkpoint(&w, None);
     // Payload tail: anchor flag 1, n positions (24 bytes), n orientations (32 bytes), origin
-    // flag 1 and its u64, the drive count 0 (this scene has no drive), then the statistics
-    // flag 0; then the checksum.
+    // flag 1 and its u64, the drive count 0 (this scene has no drive), the lag count 0, then
+    // the statistics flag 0; then the checksum.
     let anchors = 1 + 56 * w.bodies.len();
     let origin = 1 + 8;
-    let work = 8;
-    let end = v4.len() - 8;
+    let lag = 8;
+    let work = 8 + lag;
+    let end = v5.len() - 8;
     assert_eq!(
         (
-            v4[end - 1 - work - origin - anchors],
-            v4[end - 1 - work - origin],
-            &v4[end - 1 - work..end - 1],
-            v4[end - 1]
+            v5[end - 1 - work - origin - anchors],
+            v5[end - 1 - work - origin],
+            &v5[end - 1 - work..end - 1],
+            v5[end - 1]
         ),
-        (1, 1, &[0u8; 8][..], 0)
+        (1, 1, &[0u8; 16][..], 0)
     );
     let relabel = |mut b: Vec<u8>, version: u32| {
         b[11..15].copy_from_slice(&version.to_le_bytes());
@@ -765,7 +767,7 @@ fn older_version_files_still_read() {
         b
     };
     let older = |cut: usize| {
-        let mut b = v4[..end - 1 - cut].to_vec();
+        let mut b = v5[..end - 1 - cut].to_vec();
         b.push(0);
         b
     };
@@ -774,6 +776,7 @@ fn older_version_files_still_read() {
         (1, older(work + origin + anchors)),
         (2, older(work + origin)),
         (3, older(work)),
+        (4, older(lag)),
     ] {
         let path = dir.join(format!("v{version}.bin"));
         write_bytes(&path, &relabel(bytes, version));
@@ -795,15 +798,15 @@ fn older_version_files_still_read() {
         );
     }
 
-    for version in [1, 2, 3] {
+    for version in [1, 2, 3, 4] {
         let e = read_damaged(
             &dir,
             &format!("mislabelled{version}.bin"),
-            &relabel(v4[..end].to_vec(), version),
+            &relabel(v5[..end].to_vec(), version),
         );
         assert!(
             matches!(e, CheckpointError::Corrupted { .. }),
-            "a version 4 payload read as version {version}: {e:?}"
+            "a version 5 payload read as version {version}: {e:?}"
         );
     }
 }

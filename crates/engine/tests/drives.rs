@@ -319,3 +319,134 @@ fn unlimited_drives_are_kinematic_bodies_bit_for_bit() {
     let d: Driver = toml::from_str("max_force = [10.0, inf, inf]").unwrap();
     assert!(d.limits_translation() && !d.limits_rotation());
 }
+
+/// When the free pusher's program jumps from rest to its speed: over one step.
+const JUMP: (f64, f64) = (0.010, 0.011);
+
+/// The free pusher's programmed displacement at `t` (exact for the θ = 0.5 update).
+fn jump_program(speed: f64, t: f64) -> f64 {
+    let (a, b) = JUMP;
+    if t <= a {
+        0.0
+    } else if t <= b {
+        0.5 * speed * (t - a) * (t - a) / (b - a)
+    } else {
+        speed * (t - 0.5 * (a + b))
+    }
+}
+
+/// A plate alone, driven along x from rest to `speed` within one step ([`JUMP`]) with the
+/// force limit `max_force` (N) and the catch-up speed `catch_up` (m/s); returns the world and
+/// the plate's index.
+fn free_pusher(speed: f64, max_force: f64, catch_up: f64) -> (World, usize) {
+    let mut bodies = BodySet::default();
+    let mut plate = ConvexPolyhedron::cuboid(DVec3::new(0.01, 0.06, 0.04)).unwrap();
+    plate.position = DVec3::new(0.0, 0.0, 1.0);
+    let id = bodies.add_polyhedron(plate, 7850.0, BodyKind::Kinematic, PUSHER);
+    bodies.driver[id] = Some(Driver {
+        vx: vec![Term::Ramp {
+            start: JUMP.0,
+            end: JUMP.1,
+            from: 0.0,
+            to: speed,
+        }],
+        max_force: [max_force, f64::INFINITY, f64::INFINITY],
+        catch_up_speed: [catch_up, 0.0, 0.0],
+        ..Default::default()
+    });
+    (World::new(bodies, friction(0.0), settings(1e-3)), id)
+}
+
+/// A drive that cannot follow a jump in its program's velocity lags behind it: with no catch
+/// up by `V² m / (2F)` for good (the distance lost while accelerating at `F/m`), and the lag
+/// the world reports is the program's displacement less the body's; with a catch-up speed
+/// `c` it makes the distance up, never faster than `V + c`, and ends on its program's
+/// position without overshooting it.
+#[test]
+fn a_position_servo_makes_up_the_distance_its_drive_lost() {
+    let (speed, force) = (0.2, 0.5);
+    let (mut w, p) = free_pusher(speed, force, 0.0);
+    let m = w.bodies.mass(p);
+    let x0 = w.bodies.position[p].x;
+    for _ in 0..1000 {
+        w.step();
+        let lag = x0 + jump_program(speed, w.time) - w.bodies.position[p].x;
+        assert!(
+            (w.drive_lag(p).x - lag).abs() < 1e-12,
+            "reported lag {} m, geometric {lag} m",
+            w.drive_lag(p).x
+        );
+    }
+    // Discrete: the velocity climbs by F h / m a step; the continuous value is V² m / (2F).
+    let expected = speed * speed * m / (2.0 * force);
+    let lag = w.drive_lag(p).x;
+    assert!(
+        (lag - expected).abs() < 0.02 * expected,
+        "lag {lag} m, V² m / (2F) = {expected} m"
+    );
+    assert_eq!(w.bodies.velocity[p].x, speed);
+
+    let catch_up = 0.1;
+    let (mut w, p) = free_pusher(speed, force, catch_up);
+    let (mut caught, mut peak) = (None, 0.0f64);
+    for k in 0..3000 {
+        w.step();
+        let v = w.bodies.velocity[p].x;
+        peak = peak.max(v);
+        assert!(v <= speed + catch_up + 1e-12, "step {k}: {v} m/s");
+        let lag = x0 + jump_program(speed, w.time) - w.bodies.position[p].x;
+        assert!(
+            (w.drive_lag(p).x - lag).abs() < 1e-12,
+            "reported lag {}, geometric {lag}",
+            w.drive_lag(p).x
+        );
+        // No overshoot beyond the braking's discretisation, `a h²` (measured: 1.3e-8 m, one
+        // step, then on the program to rounding).
+        assert!(
+            lag > -force / m * 1e-6,
+            "step {k}: {lag} m ahead of the program"
+        );
+        if caught.is_none() && lag.abs() < 1e-9 {
+            caught = Some(k);
+        }
+    }
+    let caught = caught.expect("the servo never caught up");
+    assert!(peak > speed + 0.99 * catch_up, "peak speed {peak} m/s");
+    let end = x0 + jump_program(speed, w.time);
+    assert!(
+        (w.bodies.position[p].x - end).abs() < 1e-9,
+        "ends {} m from its program",
+        w.bodies.position[p].x - end
+    );
+    assert!((w.bodies.velocity[p].x - speed).abs() < 1e-9);
+    assert!(caught < 2500, "caught up at step {caught}");
+}
+
+/// A run with a catching-up drive resumes from a checkpoint bit-identical: the lag is state.
+#[test]
+fn a_catching_up_drive_resumes_bit_identical() {
+    use ballast_engine::output::checkpoint::{read_checkpoint, write_checkpoint};
+    let (mut straight, _) = free_pusher(0.2, 0.5, 0.1);
+    let (mut first, p) = free_pusher(0.2, 0.5, 0.1);
+    for _ in 0..400 {
+        straight.step();
+        first.step();
+    }
+    assert!(first.drive_lag(p).x > 1e-3, "lag {}", first.drive_lag(p).x);
+    let dir = std::env::temp_dir().join(format!("ballast-drives-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("lag.bin");
+    write_checkpoint(&first, &path).unwrap();
+    let (mut resumed, _) = free_pusher(0.2, 0.5, 0.1);
+    read_checkpoint(&path, &mut resumed).unwrap();
+    assert_eq!(resumed.drive_lag(p), first.drive_lag(p));
+    for _ in 0..400 {
+        straight.step();
+        resumed.step();
+    }
+    assert_eq!(
+        state_digest(&resumed.bodies),
+        state_digest(&straight.bodies)
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -91,6 +91,16 @@ pub struct TampingSpec {
     pub insertion_force: f64,
     /// Moving mass of one tine (kg): the tine and its share of the arm.
     pub tine_mass: f64,
+    /// Largest speed (m/s) at which a tine that fell behind its program makes the distance
+    /// up, along the track and vertically (a position-servoed cylinder: a tine stalled short
+    /// of its depth returns to its rest height on withdrawal); 0: the tines follow the
+    /// program's velocity only and a distance lost stays lost.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub catch_up_speed: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl Default for TampingSpec {
@@ -117,6 +127,7 @@ impl Default for TampingSpec {
             squeeze_force: DEFAULT_SQUEEZE_FORCE,
             insertion_force: DEFAULT_INSERTION_FORCE,
             tine_mass: 25.0,
+            catch_up_speed: 0.0,
         }
     }
 }
@@ -282,6 +293,13 @@ impl TampingSpec {
             }
         }
         check_range("tamping.tine_mass", self.tine_mass, 0.1, 1e4, "kg")?;
+        check_range(
+            "tamping.catch_up_speed",
+            self.catch_up_speed,
+            0.0,
+            100.0,
+            "m/s",
+        )?;
         // Tines must fit in the crib in front of the block (the bed end for end blocks).
         for &b in &self.blocks {
             let bb = track.block_box(b);
@@ -378,6 +396,7 @@ impl TampingSpec {
                             vx,
                             vz,
                             max_force: [self.squeeze_force, f64::INFINITY, self.insertion_force],
+                            catch_up_speed: [self.catch_up_speed, 0.0, self.catch_up_speed],
                             superposed: Velocities {
                                 vx: vibration,
                                 ..Velocities::default()

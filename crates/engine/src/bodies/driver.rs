@@ -21,6 +21,14 @@
 //! stroke riding on a hydraulic cylinder. A degree of freedom left at `inf` keeps following
 //! its program exactly; with every limit infinite the body is the kinematic body, bit for bit.
 //!
+//! A drive that yielded lags behind its program. By default it follows the program's
+//! *velocity* from there (a cylinder under flow control: the distance lost stays lost). With
+//! `catch_up_speed` (m/s per world axis) it is a position servo as well: the target velocity
+//! of each step gets the lag `L` (the program's displacement less the body's, the superposed
+//! motion taken out) divided by `θ h`, clamped to `±catch_up_speed`, so the body makes the
+//! lost distance up at that speed at most, within its force limit, and ends where its program
+//! ends.
+//!
 //! # Attached bodies
 //!
 //! `attached_to = N` makes a body a rigid part of body N (a tine's shaft on its blade): it
@@ -237,6 +245,11 @@ pub struct Driver {
     /// Body this one is a rigid part of (see the module documentation).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub attached_to: Option<usize>,
+    /// Largest speed (m/s, per world axis) at which a force-limited translation makes up the
+    /// distance it lags behind its program (see the module documentation); 0: none, the
+    /// program's velocity only.
+    #[serde(default, skip_serializing_if = "is_zero3")]
+    pub catch_up_speed: [f64; 3],
 }
 
 impl Default for Driver {
@@ -254,6 +267,7 @@ impl Default for Driver {
             max_torque: unlimited(),
             superposed: Velocities::default(),
             attached_to: None,
+            catch_up_speed: [0.0; 3],
         }
     }
 }
@@ -315,6 +329,10 @@ fn unlimited() -> [f64; 3] {
     [f64::INFINITY; 3]
 }
 
+fn is_zero3(x: &[f64; 3]) -> bool {
+    x.iter().all(|v| *v == 0.0)
+}
+
 fn is_unlimited(l: &[f64; 3]) -> bool {
     l.iter().all(|x| *x == f64::INFINITY)
 }
@@ -346,6 +364,11 @@ impl Driver {
         }
         let (sv, sw) = self.superposed.at(t);
         (v + sv, w + sw)
+    }
+
+    /// The program's (linear, angular) velocity at time `t`, without the superposed one.
+    pub fn program_velocity(&self, t: f64) -> (crate::math::DVec3, crate::math::DVec3) {
+        velocities_at(self.dofs(), t)
     }
 
     /// True when a translational limit is finite: the drive's translation is solved with
@@ -413,6 +436,15 @@ impl Driver {
                 .into());
             }
         }
+        let c = self.catch_up_speed;
+        if c.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(format!(
+                "catch_up_speed = [{}, {}, {}] must hold three finite speeds ≥ 0 m/s (0: no \
+                 catching up)",
+                c[0], c[1], c[2]
+            )
+            .into());
+        }
         for (name, p) in self.dofs() {
             for (k, term) in p.iter().enumerate() {
                 term.validate().map_err(|e| format!("{name}[{k}]: {e}"))?;
@@ -428,6 +460,7 @@ impl Driver {
             let moves = self.dofs().iter().any(|(_, p)| !p.is_empty())
                 || !self.superposed.is_empty()
                 || self.is_force_limited()
+                || !is_zero3(&self.catch_up_speed)
                 || self.release_at.is_some();
             if moves {
                 return Err(format!(

@@ -52,6 +52,7 @@
 //! | *anchors*            | `u8` 0 (absent) or 1 then the `n` anchor positions, then the `n` anchor orientations (version ≥ 2; a version 1 file has no such field) |
 //! | *origin*             | `u8` 0 (absent) or 1 then `u64`, the [`crate::world::initial_state_digest`] of the state the run started from (version ≥ 3; older files have no such field and are not checked) |
 //! | *drive work*         | array of (driven body `u32`, `f64` work in J): [`World::drive_work`] (version ≥ 4; older files read as no work done) |
+//! | *drive lag*          | array of (driven body `u32`, lag 3 × `f64` in m): [`World::drive_lag`] (version ≥ 5; older files read as no lag) |
 //! | *run statistics*     | `u8` 0 (absent) or 1 then steps `u64`, contacts sum `u64`, contacts max `u64`, iterations sum `u64`, max residual `f64`, steps not converged `u64`, max penetration `f64` |
 //!
 //! The shape hash is [`fnv1a64`] over the shape kind and its exact geometry (vertices, faces,
@@ -95,7 +96,7 @@ use std::path::{Path, PathBuf};
 /// The magic bytes every checkpoint starts with.
 pub const MAGIC: &[u8; 11] = b"BALLASTCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// The oldest format version this build still reads (version 1 has no anchor poses: a run
 /// resumed from it detects every pair anew at its first step).
 pub(crate) const OLDEST_VERSION: u32 = 1;
@@ -696,6 +697,11 @@ fn encode_state(p: &mut Enc, world: &World, stats: Option<&RunStats>) {
         p.u32(body);
         p.f64(work);
     }
+    p.len(world.drive_lag.len());
+    for &(body, lag) in &world.drive_lag {
+        p.u32(body);
+        p.vec3(lag);
+    }
 
     match stats {
         None => p.u8(0),
@@ -769,6 +775,7 @@ struct State {
     origin: Option<u64>,
     /// Work done by each drive (version ≥ 4).
     drive_work: Vec<(u32, f64)>,
+    drive_lag: Vec<(u32, DVec3)>,
     stats: Option<RunStats>,
 }
 
@@ -897,6 +904,13 @@ fn decode_state(d: &mut Dec, version: u32, bodies: usize) -> DecResult<State> {
             d.vec(k, |d| Ok((d.u32("driven body")?, d.f64("drive work")?)))?
         }
     };
+    let drive_lag = match version {
+        1..=4 => Vec::new(),
+        _ => {
+            let k = d.count(28, "drive lag count")?;
+            d.vec(k, |d| Ok((d.u32("lagging body")?, d.vec3("drive lag")?)))?
+        }
+    };
 
     let stats = match d.u8("statistics flag")? {
         0 => None,
@@ -920,6 +934,7 @@ fn decode_state(d: &mut Dec, version: u32, bodies: usize) -> DecResult<State> {
         anchors,
         origin,
         drive_work,
+        drive_lag,
         stats,
     })
 }
@@ -1057,6 +1072,7 @@ fn apply_state(d: State, world: &mut World) -> Option<RunStats> {
     // A checkpoint without an origin leaves the run's origin unknown rather than wrong.
     world.origin = d.origin;
     world.drive_work = d.drive_work;
+    world.drive_lag = d.drive_lag;
     // Released bodies follow the checkpoint's clock, whichever world reads it.
     for i in 0..world.bodies.len() {
         world.bodies.kind[i] = world.bodies.scene_kind(i);
