@@ -264,16 +264,14 @@ impl World {
     /// distance it moved, step by step (translation and rotation; 0 for a body that never had
     /// a force-limited drive). Negative when the body was pushed back against its drive.
     pub fn drive_work(&self, i: usize) -> f64 {
-        self.drive_work
-            .binary_search_by_key(&(i as u32), |&(b, _)| b)
-            .map_or(0.0, |k| self.drive_work[k].1)
+        value_of(&self.drive_work, i)
     }
 
     /// How far (m, per world axis) the force-limited drive of body `i` lags behind its
     /// program: the program's displacement since t = 0 less the body's, the superposed
     /// motion taken out (zero for a drive that never yielded, and for other bodies).
     pub fn drive_lag(&self, i: usize) -> DVec3 {
-        lag_of(&self.drive_lag, i)
+        value_of(&self.drive_lag, i)
     }
 
     /// The partition of this step: boxes over the dynamic bodies' centres, weighted by
@@ -459,7 +457,7 @@ impl World {
                     // (beyond its program) is counted: `R = L − h (1 − θ) e₀`.
                     let t0 = self.time;
                     let excess = b.velocity[i] - d.program_velocity(t0).0 - d.superposed.at(t0).0;
-                    let left = lag_of(&self.drive_lag, i) - excess * (h * (1.0 - s.theta));
+                    let left = value_of(&self.drive_lag, i) - excess * (h * (1.0 - s.theta));
                     let inv_mass = self.scratch.solver_bodies[i].inv_mass;
                     for k in 0..3 {
                         let c = d.catch_up_speed[k];
@@ -589,10 +587,7 @@ impl World {
             let vbar = sb.v * theta + self.bodies.velocity[i] * (1.0 - theta);
             let wbar = sb.w * theta + self.bodies.angular_velocity[i] * (1.0 - theta);
             let work = d.impulse_v.dot(vbar) + d.impulse_w.dot(wbar);
-            match self.drive_work.binary_search_by_key(&d.body, |&(b, _)| b) {
-                Ok(k) => self.drive_work[k].1 += work,
-                Err(k) => self.drive_work.insert(k, (d.body, work)),
-            }
+            add_to(&mut self.drive_work, d.body, work);
             if d.translate {
                 let (t0, t1) = (self.time, self.time + h);
                 let driver = self.bodies.driver[i]
@@ -602,10 +597,7 @@ impl World {
                 let pbar = bar((driver.program_velocity(t1).0, driver.program_velocity(t0).0));
                 let sbar = bar((driver.superposed.at(t1).0, driver.superposed.at(t0).0));
                 let step_lag = (pbar - (vbar - sbar)) * h;
-                match self.drive_lag.binary_search_by_key(&d.body, |&(b, _)| b) {
-                    Ok(k) => self.drive_lag[k].1 += step_lag,
-                    Err(k) => self.drive_lag.insert(k, (d.body, step_lag)),
-                }
+                add_to(&mut self.drive_lag, d.body, step_lag);
             }
         }
         times.nlgs += lap.lap();
@@ -706,10 +698,19 @@ fn catch_up(left: f64, speed: f64, accel: f64, h: f64) -> f64 {
     e.min(speed).copysign(left)
 }
 
-/// The lag of body `i` in `lags` (sorted by body), zero when absent.
-fn lag_of(lags: &[(u32, DVec3)], i: usize) -> DVec3 {
-    lags.binary_search_by_key(&(i as u32), |&(b, _)| b)
-        .map_or(DVec3::ZERO, |k| lags[k].1)
+/// The value of body `i` in a per-drive table (sorted by body), zero when absent.
+fn value_of<T: Copy + Default>(table: &[(u32, T)], i: usize) -> T {
+    table
+        .binary_search_by_key(&(i as u32), |&(b, _)| b)
+        .map_or(T::default(), |k| table[k].1)
+}
+
+/// Adds `x` to the value of `body` in a per-drive table, inserting it in body order.
+fn add_to<T: Copy + std::ops::AddAssign>(table: &mut Vec<(u32, T)>, body: u32, x: T) {
+    match table.binary_search_by_key(&body, |&(b, _)| b) {
+        Ok(k) => table[k].1 += x,
+        Err(k) => table.insert(k, (body, x)),
+    }
 }
 
 /// The driver of body `i` if it is driven (not yet released) with a force limit.
