@@ -33,6 +33,20 @@
 //! The blocks are thus put in place rather than pressed in: the soffit rests on the cut surface
 //! of the bed, which the lift of the tamping cycle leaves anyway.
 //!
+//! # Tiled preparation
+//!
+//! With `tiled` (the paper preset), a track of `blocks` equally spaced blocks
+//! (`length = blocks × spacing`) is prepared as one segment repeated: stages 1–5 on one block's
+//! segment (one `spacing` long, the block in its middle, walls at both ends), the segment's bed
+//! copied `blocks` times along the track (copy `c` of grain `i` is grain `c·n + i` of the
+//! generated list, the segment's list repeated), then the whole bed settled around its fixed
+//! blocks for `tile_settle_time` (the grains at the former segment ends lean on their new
+//! neighbours instead of a wall) and healed (stage 5). Its cost is one segment's deposition
+//! plus a short settling of the whole bed, instead of depositing all of it: the deposition's
+//! 0.9 s of simulated time is what makes a large bed slow. The price: the blocks start on
+//! copies of one bed (their compacities differ by the final settling only), and the ballast
+//! at the segment ends, deposited against a wall, is a little looser there.
+//!
 //! # Cache
 //!
 //! The result is a list of (grain index in the generated list, pose), stored with the key (the
@@ -109,6 +123,27 @@ pub struct PreparationSpec {
     pub heal_steps: usize,
     /// Reuse a prepared bed with the same parameters from the cache folder.
     pub cache: bool,
+    /// Prepare one block's segment of the track (one `spacing` long, its block in the middle,
+    /// walls at its ends) and repeat it along the track, then let the whole bed settle for
+    /// `tile_settle_time` and heal it (see the [module documentation](self)). Needs
+    /// `track.length = blocks × spacing`. Absent from the cache key when false, so that the
+    /// beds prepared before it existed are still read.
+    #[serde(skip_serializing_if = "is_false")]
+    pub tiled: bool,
+    /// Settling time of the whole tiled bed (s), see `tiled`.
+    #[serde(skip_serializing_if = "is_default_tile_settle_time")]
+    pub tile_settle_time: f64,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+/// Default of [`PreparationSpec::tile_settle_time`] (s).
+const TILE_SETTLE_TIME: f64 = 0.05;
+
+fn is_default_tile_settle_time(t: &f64) -> bool {
+    *t == TILE_SETTLE_TIME
 }
 
 impl Default for PreparationSpec {
@@ -128,6 +163,8 @@ impl Default for PreparationSpec {
             heal_overlap: 1e-3,
             heal_steps: 50,
             cache: true,
+            tiled: false,
+            tile_settle_time: TILE_SETTLE_TIME,
         }
     }
 }
@@ -173,6 +210,13 @@ impl PreparationSpec {
             1e-6,
             0.1,
             "m",
+        )?;
+        check_range(
+            "preparation.tile_settle_time",
+            self.tile_settle_time,
+            0.0,
+            100.0,
+            "s",
         )?;
         if self.heal_steps > 100_000 {
             return Err(crate::error::refuse(
@@ -330,6 +374,9 @@ pub fn load_or_prepare(
     track.validate()?;
     ballast.grains.validate()?;
     prep.validate()?;
+    if prep.tiled {
+        check_tiling(track)?;
+    }
     friction.validate()?;
     let key = key_json(track, ballast, prep, friction);
     let path = cache_dir
@@ -364,6 +411,23 @@ fn generate(
     ballast: &BallastSpec,
     prep: &PreparationSpec,
 ) -> Result<Vec<PlacedGrain>, Error> {
+    if prep.tiled {
+        // The segment's grains once per block; the copies share their shapes.
+        let piece = PreparationSpec {
+            tiled: false,
+            ..prep.clone()
+        };
+        let one = generate(&segment(track), ballast, &piece)?;
+        let n = one.len();
+        return Ok((0..track.blocks.max(1))
+            .flat_map(|c| {
+                one.iter().map(move |g| PlacedGrain {
+                    index: c * n + g.index,
+                    ..g.clone()
+                })
+            })
+            .collect());
+    }
     let volume = prep.compacity * prep.overfill * track.bed_box().volume();
     let builds = generate_grains(&ballast.grains, Amount::SolidVolume(volume), ballast.seed)?;
     Ok(builds
@@ -408,6 +472,78 @@ fn prepare_from(
     track: &TrackSpec,
     ballast: &BallastSpec,
     prep: &PreparationSpec,
+    grains: Vec<PlacedGrain>,
+    progress: &mut dyn FnMut(PrepProgress),
+) -> PreparedSample {
+    if prep.tiled {
+        prepare_tiled(track, ballast, prep, grains, progress)
+    } else {
+        deposit(track, ballast, prep, grains, progress)
+    }
+}
+
+/// The solver settings of every stage of the preparation.
+fn deposition_settings(prep: &PreparationSpec) -> StepSettings {
+    StepSettings {
+        dt: prep.dt,
+        alert: prep.alert,
+        solver: SolverSettings {
+            tolerance: prep.tolerance,
+            max_iterations: prep.max_iterations,
+            norm: ConvergenceNorm::Quad,
+            ..SolverSettings::default()
+        },
+        // Parallel NLGS on the same split as the default job (deterministic, any thread count).
+        ddm: Some(default_ddm()),
+        ..StepSettings::default()
+    }
+}
+
+/// The preparation's friction: `prep.friction` on every contact.
+fn deposition_friction(prep: &PreparationSpec) -> TrackFriction {
+    TrackFriction {
+        grain_grain: prep.friction,
+        grain_block: prep.friction,
+        grain_tine: prep.friction,
+        grain_wall: prep.friction,
+    }
+}
+
+/// Steps `world` until `min_time`, then on while 99 % of its grains are not slower than
+/// `prep.rest_speed`, for at most `max_extra` more seconds; returns the steps done.
+fn settle(
+    world: &mut World,
+    prep: &PreparationSpec,
+    stage: u8,
+    min_time: f64,
+    max_extra: f64,
+    progress: &mut dyn FnMut(PrepProgress),
+) -> u64 {
+    let n = world.bodies.len();
+    let mut speed = f64::INFINITY;
+    let mut steps = 0;
+    while world.time < min_time || (speed > prep.rest_speed && world.time < min_time + max_extra) {
+        let r = world.step();
+        steps += 1;
+        if world.step_index.is_multiple_of(20) {
+            speed = rest_quantile(world);
+            progress(PrepProgress {
+                stage,
+                time: world.time,
+                target: min_time,
+                grains: n,
+                contacts: r.contacts,
+            });
+        }
+    }
+    steps
+}
+
+/// The classic preparation (stages 1–5 of the [module documentation](self)).
+fn deposit(
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
     mut grains: Vec<PlacedGrain>,
     progress: &mut dyn FnMut(PrepProgress),
 ) -> PreparedSample {
@@ -422,54 +558,22 @@ fn prepare_from(
     let excess = height - bed.min.z - prep.overfill * (bed.max.z - bed.min.z);
     let fall = (2.0 * excess.max(0.0) / 9.81).sqrt();
 
-    let settings = StepSettings {
-        dt: prep.dt,
-        alert: prep.alert,
-        solver: SolverSettings {
-            tolerance: prep.tolerance,
-            max_iterations: prep.max_iterations,
-            norm: ConvergenceNorm::Quad,
-            ..SolverSettings::default()
-        },
-        // Parallel NLGS on the same split as the default job (deterministic, any thread count).
-        ddm: Some(default_ddm()),
-        ..StepSettings::default()
-    };
+    let settings = deposition_settings(prep);
     let density = ballast.grains.density;
-    let mut steps = 0;
-    let mut simulated = 0.0;
-    let mut run = |world: &mut World, stage: u8, min_time: f64| {
-        let n = world.bodies.len();
-        let mut speed = f64::INFINITY;
-        while world.time < min_time
-            || (speed > prep.rest_speed && world.time < min_time + prep.max_extra_time)
-        {
-            let r = world.step();
-            steps += 1;
-            if world.step_index.is_multiple_of(20) {
-                speed = rest_quantile(world);
-                progress(PrepProgress {
-                    stage,
-                    time: world.time,
-                    target: min_time,
-                    grains: n,
-                    contacts: r.contacts,
-                });
-            }
-        }
-        simulated += world.time;
-    };
+    let friction = deposition_friction(prep);
 
     // Deposition into the empty box.
     let (bodies, layout) = build_bodies(track, &Blocks::Absent, None, &grains, density);
-    let deposition_friction = TrackFriction {
-        grain_grain: prep.friction,
-        grain_block: prep.friction,
-        grain_tine: prep.friction,
-        grain_wall: prep.friction,
-    };
-    let mut world = World::new(bodies, deposition_friction.table(), settings.clone());
-    run(&mut world, 1, fall + prep.settle_time);
+    let mut world = World::new(bodies, friction.table(), settings.clone());
+    let mut steps = settle(
+        &mut world,
+        prep,
+        1,
+        fall + prep.settle_time,
+        prep.max_extra_time,
+        progress,
+    );
+    let mut simulated = world.time;
     for (g, i) in grains.iter_mut().zip(layout.grains.clone()) {
         g.position = world.bodies.position[i];
         g.orientation = world.bodies.orientation[i];
@@ -496,41 +600,152 @@ fn prepare_from(
 
     // Settle around the fixed blocks.
     let (bodies, layout) = build_bodies(track, &Blocks::Fixed, None, &grains, density);
-    let mut world = World::new(bodies, deposition_friction.table(), settings);
-    run(&mut world, 2, prep.block_settle_time);
+    let mut world = World::new(bodies, friction.table(), settings);
+    steps += settle(
+        &mut world,
+        prep,
+        2,
+        prep.block_settle_time,
+        prep.max_extra_time,
+        progress,
+    );
+    simulated += world.time;
+    let mut sample = heal_and_keep(&mut world, prep, layout.grains, grains, progress);
+    let r = &mut sample.report;
+    r.generated = generated;
+    r.removed_in_blocks = in_blocks;
+    r.removed_above = above;
+    r.steps += steps;
+    r.simulated_s += simulated;
+    r.stack_height = height - bed.min.z;
+    r.wall_s = clock.elapsed().as_secs_f64();
+    sample
+}
 
-    let healed = heal(&mut world, prep, layout.grains.clone(), progress);
-    for (g, i) in grains.iter_mut().zip(layout.grains.clone()) {
+/// Heals `world` (stage 5), whose grains are the bodies `bodies` made of `grains` in order,
+/// and returns the bed: the grains at their poses, those still wedged taken out. The report
+/// holds what the healing did and the bed's final state; the caller fills in the rest.
+fn heal_and_keep(
+    world: &mut World,
+    prep: &PreparationSpec,
+    bodies: std::ops::Range<usize>,
+    mut grains: Vec<PlacedGrain>,
+    progress: &mut dyn FnMut(PrepProgress),
+) -> PreparedSample {
+    let healed = heal(world, prep, bodies.clone(), progress);
+    for (g, i) in grains.iter_mut().zip(bodies.clone()) {
         g.position = world.bodies.position[i];
         g.orientation = world.bodies.orientation[i];
     }
-    let first = layout.grains.start;
+    let first = bodies.start;
     let mut j = 0;
     grains.retain(|_| {
         j += 1;
         healed.wedged.binary_search(&(first + j - 1)).is_err()
     });
-    let (speed, mean_speed) = speeds(&world);
+    let (speed, mean_speed) = speeds(world);
     PreparedSample {
         report: PreparationReport {
-            generated,
             grains: grains.len(),
-            removed_in_blocks: in_blocks,
-            removed_above: above,
             removed_wedged: healed.wedged.len(),
-            steps: steps + healed.steps,
-            simulated_s: simulated + healed.steps as f64 * prep.dt,
-            wall_s: clock.elapsed().as_secs_f64(),
+            steps: healed.steps,
+            simulated_s: healed.steps as f64 * prep.dt,
             max_penetration: healed.max_penetration,
-            stack_height: height - bed.min.z,
             max_speed: speed,
             mean_speed,
             settled_penetration: healed.settled_penetration,
             heal_steps: healed.steps,
+            ..PreparationReport::default()
         },
         grains,
         from_cache: false,
     }
+}
+
+/// The track segment a tiled preparation prepares: one block, one spacing long.
+fn segment(track: &TrackSpec) -> TrackSpec {
+    TrackSpec {
+        blocks: 1,
+        length: Some(track.spacing),
+        ..track.clone()
+    }
+}
+
+/// Checks that `track` can be tiled by its segment (`preparation.tiled`).
+fn check_tiling(track: &TrackSpec) -> Result<(), FieldError> {
+    let whole = track.blocks as f64 * track.spacing;
+    if (track.length() - whole).abs() > 1e-9 * whole {
+        return Err(crate::error::refuse(
+            "preparation.tiled",
+            true,
+            &format!(
+                "true only when track.length ({} m) is blocks × spacing ({} m)",
+                track.length(),
+                whole
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The tiled preparation (`preparation.tiled`): the segment's bed by [`deposit`], repeated
+/// `blocks` times along the track, settled as a whole for `tile_settle_time` (the grains at
+/// the former segment ends lean on their new neighbours instead of a wall), then healed.
+/// `generated` is the segment's generated list repeated `blocks` times (see [`generate`]).
+fn prepare_tiled(
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
+    generated: Vec<PlacedGrain>,
+    progress: &mut dyn FnMut(PrepProgress),
+) -> PreparedSample {
+    let clock = std::time::Instant::now();
+    let copies = track.blocks.max(1);
+    let n = generated.len() / copies;
+    let piece = PreparationSpec {
+        tiled: false,
+        ..prep.clone()
+    };
+    let seg = deposit(
+        &segment(track),
+        ballast,
+        &piece,
+        generated[..n].to_vec(),
+        progress,
+    );
+    let mut grains = Vec::with_capacity(seg.grains.len() * copies);
+    for c in 0..copies {
+        let shift = DVec3::new(c as f64 * track.spacing, 0.0, 0.0);
+        grains.extend(seg.grains.iter().map(|g| PlacedGrain {
+            index: c * n + g.index,
+            shape: g.shape.clone(),
+            position: g.position + shift,
+            orientation: g.orientation,
+        }));
+    }
+    let (bodies, layout) =
+        build_bodies(track, &Blocks::Fixed, None, &grains, ballast.grains.density);
+    let mut world = World::new(
+        bodies,
+        deposition_friction(prep).table(),
+        deposition_settings(prep),
+    );
+    let steps = settle(&mut world, prep, 2, prep.tile_settle_time, 0.0, progress);
+    let simulated = world.time;
+    let mut sample = heal_and_keep(&mut world, prep, layout.grains, grains, progress);
+    let s = &seg.report;
+    let r = &mut sample.report;
+    r.generated = generated.len();
+    r.removed_in_blocks = s.removed_in_blocks * copies;
+    r.removed_above = s.removed_above * copies;
+    r.removed_wedged += s.removed_wedged * copies;
+    r.steps += s.steps + steps;
+    r.simulated_s += s.simulated_s + simulated;
+    r.stack_height = s.stack_height;
+    r.settled_penetration = r.settled_penetration.max(s.settled_penetration);
+    r.heal_steps += s.heal_steps;
+    r.wall_s = clock.elapsed().as_secs_f64();
+    sample
 }
 
 /// What the healing stage did.

@@ -274,6 +274,9 @@ impl TrackScenario {
             ..TrackSpec::default()
         };
         s.tamping.blocks = vec![4];
+        // One block's segment deposited and repeated 7 times: the bed in a fraction of the
+        // time of depositing 3.6 m at once (BENCHMARKS.md, session 15).
+        s.preparation.tiled = true;
         s.solver.max_iterations = 740;
         s.simulation.dt = 2e-4;
         s.ddm = Some(DdmSettings {
