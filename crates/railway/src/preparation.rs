@@ -413,11 +413,8 @@ fn generate(
 ) -> Result<Vec<PlacedGrain>, Error> {
     if prep.tiled {
         // The segment's grains once per block; the copies share their shapes.
-        let piece = PreparationSpec {
-            tiled: false,
-            ..prep.clone()
-        };
-        let one = generate(&segment(track), ballast, &piece)?;
+        let (piece_track, piece) = segment(track, prep);
+        let one = generate(&piece_track, ballast, &piece)?;
         let n = one.len();
         return Ok((0..track.blocks.max(1))
             .flat_map(|c| {
@@ -662,13 +659,19 @@ fn heal_and_keep(
     }
 }
 
-/// The track segment a tiled preparation prepares: one block, one spacing long.
-fn segment(track: &TrackSpec) -> TrackSpec {
-    TrackSpec {
+/// The track segment a tiled preparation prepares (one block, one spacing long) and how:
+/// deposited in one piece.
+fn segment(track: &TrackSpec, prep: &PreparationSpec) -> (TrackSpec, PreparationSpec) {
+    let piece_track = TrackSpec {
         blocks: 1,
         length: Some(track.spacing),
         ..track.clone()
-    }
+    };
+    let piece = PreparationSpec {
+        tiled: false,
+        ..prep.clone()
+    };
+    (piece_track, piece)
 }
 
 /// Checks that `track` can be tiled by its segment (`preparation.tiled`).
@@ -702,12 +705,9 @@ fn prepare_tiled(
     let clock = std::time::Instant::now();
     let copies = track.blocks.max(1);
     let n = generated.len() / copies;
-    let piece = PreparationSpec {
-        tiled: false,
-        ..prep.clone()
-    };
+    let (piece_track, piece) = segment(track, prep);
     let seg = deposit(
-        &segment(track),
+        &piece_track,
         ballast,
         &piece,
         generated[..n].to_vec(),

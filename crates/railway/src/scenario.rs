@@ -261,7 +261,7 @@ impl TrackScenario {
     /// dt = 2e-4 s, μ = 1 (0.8 against walls), DDM 7×1×1 (7 slabs along the track, x) with
     /// n = m = 1, at most 740 sweeps. The bed is tiled (one block's segment deposited and
     /// repeated) and deposited with μ = 0.3, which with the default 31.5/50 grading holds the
-    /// paper's number of grains (88,100) at a bulk compacity of 0.6 (BENCHMARKS.md, session 15).
+    /// paper's number of grains (88,100) at a bulk compacity of 0.6 (BENCHMARKS.md).
     pub fn paper_preset() -> Self {
         let mut s = Self::default_preset();
         s.track = TrackSpec {
@@ -274,10 +274,9 @@ impl TrackScenario {
         };
         s.tamping.blocks = vec![4];
         // One block's segment deposited and repeated 7 times: the bed in a fraction of the
-        // time of depositing 3.6 m at once; settled 0.15 s as a whole, the joins come to rest
-        // (mean grain speed 0.016 m/s, 0.060 after 0.05 s). Deposited with μ = 0.3 rather than
-        // 0.2: 88,270 grains at a bulk compacity of 0.61 (0.2 with the coarse side of the
-        // bands: 86,121 grains at 0.64, denser than a ballast bed).
+        // time of depositing 3.6 m at once; settled 0.15 s as a whole so that the joins come
+        // to rest (0.05 s left them moving). Deposited with μ = 0.3 rather than 0.2, which
+        // packs this bed denser than a ballast bed (BENCHMARKS.md).
         s.preparation.tiled = true;
         s.preparation.tile_settle_time = 0.15;
         s.preparation.friction = 0.3;
