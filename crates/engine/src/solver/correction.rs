@@ -192,7 +192,7 @@ pub fn pseudo_velocities(
 mod tests {
     use super::*;
     use crate::math::{DMat3, Sym3};
-    use crate::solver::delassus::delassus_block;
+    use crate::solver::delassus::{contact_along_x, delassus_block};
 
     /// A fixed body 0 and two unit-mass cubes 1, 2 in a row along x; contact (0, 1) overlaps
     /// by 5 mm, (1, 2) is open by 0.1 mm. Points on the line of the centres: no rotation.
@@ -204,31 +204,7 @@ mod tests {
             inv_inertia: DMat3::IDENTITY * 6.0 * inv_mass,
         };
         let bodies = vec![body(0.0), body(1.0), body(1.0)];
-        let frame = [DVec3::X, DVec3::Y, DVec3::Z];
-        let contact = |a: u32, b: u32, gap: f64| {
-            let (r1, r2) = (DVec3::X * 0.5, -DVec3::X * 0.5);
-            let w = Sym3::from_mat(delassus_block(
-                &frame,
-                r1,
-                r2,
-                &bodies[a as usize],
-                &bodies[b as usize],
-            ));
-            LocalProblem {
-                body1: a,
-                body2: b,
-                dynamic1: a != 0,
-                dynamic2: true,
-                frame: [frame[0], frame[1]],
-                r1,
-                r2,
-                w,
-                gap,
-                mu: 0.0,
-                r: DVec3::ZERO,
-                r_prev: 0.0,
-            }
-        };
+        let contact = |a, b, gap| contact_along_x(&bodies, a, b, gap, 0.0);
         let locals = vec![contact(0, 1, -5e-3), contact(1, 2, 1e-4)];
         (locals, bodies)
     }

@@ -676,12 +676,16 @@ pub fn solve_and_correct(
         sums += drive_sums;
         report.iterations = j;
         report.quad = sums.quad();
-        if stop.converged(s, j, report.quad, || residual(nlgs, p, dr, pb, q)) {
+        if stop.converged(s, j, report.quad, |bound| {
+            residual_within(nlgs, p, dr, pb, q, bound)
+        }) {
             report.converged = true;
             break;
         }
     }
-    report.residual = stop.final_residual(report.iterations, || residual(nlgs, p, dr, pb, q));
+    report.residual = stop.final_residual(report.iterations, || {
+        residual_within(nlgs, p, dr, pb, q, f64::INFINITY).unwrap_or(f64::INFINITY)
+    });
     for (d, w) in drives.iter_mut().zip(dr.iter()) {
         d.impulse_v = w.impulse_v;
         d.impulse_w = w.impulse_w;
@@ -763,19 +767,28 @@ fn correct(
 }
 
 /// Relative natural-map residual over all contacts and drives: each bucket's sum in parallel,
-/// the sums added in the equivalent order, the drives' last.
-fn residual(nlgs: &Nlgs, p: &DdmProblem, dr: &[DriveRows], pb: &[SolverBody], q: f64) -> f64 {
+/// the sums added in the equivalent order, the drives' last; `None` as soon as one bucket's
+/// partial sum shows that it exceeds `bound` (the sums are non-negative).
+fn residual_within(
+    nlgs: &Nlgs,
+    p: &DdmProblem,
+    dr: &[DriveRows],
+    pb: &[SolverBody],
+    q: f64,
+    bound: f64,
+) -> Option<f64> {
+    let limit = super::exceeding_sum(bound, q);
     let buckets: Vec<&Bucket> = p.buckets().collect();
-    let sums: Vec<f64> = buckets
+    let sums: Vec<Option<f64>> = buckets
         .par_iter()
-        .map(|b| nlgs.residual_sum(&b.locals, pb))
+        .map(|b| nlgs.residual_sum_within(&b.locals, pb, limit))
         .collect();
     let mut sum = 0.0;
     for s in sums {
-        sum += s;
+        sum += s?;
     }
     sum += drive::residual_sum(dr, pb);
-    sum.sqrt() / q
+    Some(sum.sqrt() / q)
 }
 
 #[cfg(test)]

@@ -187,6 +187,35 @@ pub(crate) fn build_local_problems(
         .collect_into_vec(out);
 }
 
+/// For unit tests: a contact between bodies `a` and `b` on the line of their centres along
+/// x (lever arms ±x/2, frame x, y, z); body 0 is the static one.
+#[cfg(test)]
+pub(crate) fn contact_along_x(
+    bodies: &[SolverBody],
+    a: u32,
+    b: u32,
+    gap: f64,
+    mu: f64,
+) -> LocalProblem {
+    let frame = [DVec3::X, DVec3::Y, DVec3::Z];
+    let (r1, r2) = (DVec3::X * 0.5, -DVec3::X * 0.5);
+    let w = delassus_block(&frame, r1, r2, &bodies[a as usize], &bodies[b as usize]);
+    LocalProblem {
+        body1: a,
+        body2: b,
+        dynamic1: a != 0,
+        dynamic2: true,
+        frame: [frame[0], frame[1]],
+        r1,
+        r2,
+        w: Sym3::from_mat(w),
+        gap,
+        mu,
+        r: DVec3::ZERO,
+        r_prev: 0.0,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

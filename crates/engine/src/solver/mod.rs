@@ -103,6 +103,15 @@ impl Default for SolverSettings {
     }
 }
 
+/// The squared bound past which a partial sum of squared residual terms proves that the
+/// relative residual `√sum / q` exceeds `bound` (with room for the rounding of the square
+/// root and the division, so that the proof never contradicts the full evaluation).
+#[inline]
+pub(crate) fn exceeding_sum(bound: f64, q: f64) -> f64 {
+    let b = bound * q;
+    b * b * (1.0 + 1e-9)
+}
+
 /// Default [`SolverSettings::residual_tolerance`]: a relative natural-map residual of 1e-3.
 pub(crate) const DEFAULT_RESIDUAL_TOLERANCE: f64 = 1e-3;
 
@@ -133,23 +142,26 @@ impl StopRule {
     }
 
     /// Whether iteration `k` (1-based) ends the solve as converged. `quad` is the Quad norm
-    /// of its sweep; `residual` evaluates the relative natural-map residual (called at most
-    /// once).
+    /// of its sweep; `residual(bound)` evaluates the relative natural-map residual (called at
+    /// most once), or returns `None` as soon as it is known to exceed `bound`: the step is then
+    /// not converged whatever its value, and a stalled step's checks stop after the first
+    /// contacts that carry more residual than the tolerance allows, instead of costing a sweep.
     pub(crate) fn converged(
         &mut self,
         s: &SolverSettings,
         k: usize,
         quad: f64,
-        residual: impl FnOnce() -> f64,
+        residual: impl FnOnce(f64) -> Option<f64>,
     ) -> bool {
         if !k.is_multiple_of(s.check_every) && k != s.max_iterations {
             return false;
         }
         let last = k == s.max_iterations;
-        let residual = || {
-            let r = residual();
-            self.last = Some((k, r));
-            r
+        // Whether the residual is within `bound`.
+        let within = |bound: f64| {
+            let r = residual(bound);
+            self.last = r.map(|r| (k, r));
+            r.is_some_and(|r| r <= bound)
         };
         match s.norm {
             ConvergenceNorm::Quad => {
@@ -162,7 +174,7 @@ impl StopRule {
                 if k < self.next_residual_check && !last {
                     return false;
                 }
-                let ok = residual() <= s.residual_tolerance;
+                let ok = within(s.residual_tolerance);
                 if !ok {
                     self.next_residual_check = k + (k / 4).max(1);
                 }
@@ -174,8 +186,7 @@ impl StopRule {
                 if quad > s.tolerance && k < self.next_residual_check && !last {
                     return false;
                 }
-                let r = residual();
-                let ok = r <= s.tolerance && r <= s.residual_tolerance;
+                let ok = within(s.tolerance.min(s.residual_tolerance));
                 if !ok {
                     self.next_residual_check = k + (k / 4).max(1);
                 }
@@ -213,5 +224,65 @@ impl SolverSettings {
             )));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A residual that may stop early (`None` past the bound) gives the stop rule the same
+    /// decisions, at the same iterations, and the same final residual as the full one.
+    #[test]
+    fn bounded_residual_checks_decide_as_full_ones() {
+        // A residual that falls, stalls above the tolerance, then passes it.
+        let residual_at = |k: usize| 0.5 / k as f64 + if k < 60 { 2e-3 } else { 0.0 };
+        for norm in [ConvergenceNorm::Quad, ConvergenceNorm::NaturalMap] {
+            let s = SolverSettings {
+                tolerance: 1e-3,
+                max_iterations: 1000,
+                norm,
+                ..Default::default()
+            };
+            let (mut full, mut bounded) = (StopRule::new(), StopRule::new());
+            let (mut calls, mut stops) = (0, None);
+            for k in 1..=s.max_iterations {
+                // A Quad norm below the tolerance from iteration 20 on.
+                let quad = if k < 20 { 1.0 } else { 1e-4 };
+                let a = full.converged(&s, k, quad, |_| Some(residual_at(k)));
+                let b = bounded.converged(&s, k, quad, |bound| {
+                    calls += 1;
+                    let r = residual_at(k);
+                    (r <= bound).then_some(r)
+                });
+                assert_eq!(a, b, "{norm:?}, iteration {k}");
+                if a {
+                    stops = Some(k);
+                    break;
+                }
+            }
+            let k = stops.expect("the residual passes the tolerance");
+            assert!((500..=600).contains(&k), "{norm:?}: stopped at {k}");
+            assert!(calls > 1);
+            assert_eq!(
+                full.final_residual(k, || unreachable!()),
+                bounded.final_residual(k, || unreachable!())
+            );
+            // A check that stopped early is evaluated again in full at the end.
+            let mut early = StopRule::new();
+            assert!(!early.converged(&s, 1, 1e-4, |_| None));
+            assert_eq!(early.final_residual(1, || 0.25), 0.25);
+        }
+    }
+
+    /// The bound on the partial sums proves `√sum / q > bound` with room for rounding.
+    #[test]
+    fn exceeding_sum_is_past_the_bound() {
+        for (bound, q) in [(1e-3, 2.5), (1e-3, 1e-7), (0.7, 3e4)] {
+            let limit = exceeding_sum(bound, q);
+            assert!(limit.sqrt() / q > bound);
+            assert!(limit <= (bound * q).powi(2) * (1.0 + 1e-8));
+        }
+        assert_eq!(exceeding_sum(f64::INFINITY, 1.0), f64::INFINITY);
     }
 }

@@ -215,13 +215,22 @@ impl Nlgs {
         sums
     }
 
-    /// `Σ_α ‖residual_α‖²` over `locals` (see [`ConvergenceNorm::NaturalMap`]).
-    pub(crate) fn residual_sum<B: BodyAccess + ?Sized>(
+    /// `Σ_α ‖residual_α‖²` over `locals` (see [`ConvergenceNorm::NaturalMap`]), or `None` once
+    /// the partial sum exceeds `limit` (the terms are non-negative: the whole sum would too).
+    pub(crate) fn residual_sum_within<B: BodyAccess + ?Sized>(
         &self,
         locals: &[LocalProblem],
         v: &B,
-    ) -> f64 {
-        locals.iter().map(|c| self.residual2(c, v)).sum()
+        limit: f64,
+    ) -> Option<f64> {
+        let mut sum = 0.0;
+        for c in locals {
+            sum += self.residual2(c, v);
+            if sum > limit {
+                return None;
+            }
+        }
+        Some(sum)
     }
 
     /// Solves the problem with all contacts in their stored order. `v` holds `V_free` on entry
@@ -261,8 +270,8 @@ impl Nlgs {
             sums += drive::sweep(drives, v);
             report.iterations = k;
             report.quad = sums.quad();
-            if stop.converged(s, k, report.quad, || {
-                self.natural_residual(locals, drives, v, q)
+            if stop.converged(s, k, report.quad, |bound| {
+                self.natural_residual_within(locals, drives, v, q, bound)
             }) {
                 report.converged = true;
                 break;
@@ -272,6 +281,20 @@ impl Nlgs {
             self.natural_residual(locals, drives, v, q)
         });
         report
+    }
+
+    /// [`Nlgs::natural_residual`], or `None` as soon as a partial sum shows it exceeds `bound`
+    /// (the terms are added in the same order, so a full evaluation gives the same value).
+    pub(crate) fn natural_residual_within(
+        &self,
+        locals: &[LocalProblem],
+        drives: &[DriveRows],
+        v: &[SolverBody],
+        q: f64,
+        bound: f64,
+    ) -> Option<f64> {
+        let sum = self.residual_sum_within(locals, v, super::exceeding_sum(bound, q))?;
+        Some((sum + drive::residual_sum(drives, v)).sqrt() / q)
     }
 
     /// Relative natural-map residual of the whole problem (contacts and drives).
@@ -285,5 +308,76 @@ impl Nlgs {
         (locals.iter().map(|c| self.residual2(c, v)).sum::<f64>() + drive::residual_sum(drives, v))
             .sqrt()
             / q
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::DMat3;
+    use crate::solver::delassus::contact_along_x;
+
+    /// Three unit cubes in a row along x, approaching each other, and a fixed body 0 below:
+    /// every contact violates the law, so every residual term is positive.
+    fn row() -> (Vec<LocalProblem>, Vec<SolverBody>) {
+        let body = |inv_mass: f64, vx: f64| SolverBody {
+            v: DVec3::new(vx, 0.0, 0.0),
+            w: DVec3::ZERO,
+            inv_mass,
+            inv_inertia: DMat3::IDENTITY * 6.0 * inv_mass,
+        };
+        let bodies = vec![
+            body(0.0, 0.0),
+            body(1.0, -0.1),
+            body(1.0, -0.3),
+            body(1.0, -0.6),
+        ];
+        let contact = |a, b| contact_along_x(&bodies, a, b, 0.0, 0.5);
+        (vec![contact(0, 1), contact(1, 2), contact(2, 3)], bodies)
+    }
+
+    /// The bounded sum is the full sum, term for term, unless a partial sum passes the limit.
+    #[test]
+    fn bounded_residual_sum_is_the_full_sum_or_proves_it_larger() {
+        let (locals, bodies) = row();
+        let nlgs = Nlgs {
+            settings: SolverSettings::default(),
+            h_theta: 5e-4,
+            compliance: 0.0,
+        };
+        let terms: Vec<f64> = locals
+            .iter()
+            .map(|c| nlgs.residual2(c, &bodies[..]))
+            .collect();
+        assert!(terms.iter().all(|&t| t > 0.0), "{terms:?}");
+        let full = terms.iter().fold(0.0, |s, &t| s + t);
+        assert_eq!(
+            nlgs.residual_sum_within(&locals, &bodies[..], f64::INFINITY),
+            Some(full)
+        );
+        assert_eq!(
+            nlgs.residual_sum_within(&locals, &bodies[..], full),
+            Some(full)
+        );
+        // Past the first term's share: it stops there.
+        assert_eq!(
+            nlgs.residual_sum_within(&locals, &bodies[..], 0.5 * terms[0]),
+            None
+        );
+        assert_eq!(
+            nlgs.residual_sum_within(&locals, &bodies[..], full * (1.0 - 1e-12)),
+            None
+        );
+        // The relative residual: the same value as the full evaluation, or None past the bound.
+        let q = 0.7;
+        let r = nlgs.natural_residual(&locals, &[], &bodies, q);
+        assert_eq!(
+            nlgs.natural_residual_within(&locals, &[], &bodies, q, r),
+            Some(r)
+        );
+        assert_eq!(
+            nlgs.natural_residual_within(&locals, &[], &bodies, q, 0.5 * r),
+            None
+        );
     }
 }

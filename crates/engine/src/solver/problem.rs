@@ -287,7 +287,7 @@ impl ContactProblem {
             } else {
                 dwr2.sqrt()
             };
-            if stop.converged(settings, k, report.quad, || self.residual(r)) {
+            if stop.converged(settings, k, report.quad, |_| Some(self.residual(r))) {
                 report.converged = true;
                 break;
             }
