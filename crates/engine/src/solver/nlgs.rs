@@ -305,9 +305,9 @@ impl Nlgs {
         v: &[SolverBody],
         q: f64,
     ) -> f64 {
-        (locals.iter().map(|c| self.residual2(c, v)).sum::<f64>() + drive::residual_sum(drives, v))
-            .sqrt()
-            / q
+        // Never `None` without a bound.
+        self.natural_residual_within(locals, drives, v, q, f64::INFINITY)
+            .unwrap_or(f64::INFINITY)
     }
 }
 
