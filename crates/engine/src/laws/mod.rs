@@ -2,7 +2,9 @@
 //! and the exact solver of the local 3×3 problem.
 
 pub mod coulomb;
+pub mod elastic;
 pub mod friction;
 
 pub use coulomb::{solve_local, ContactStatus};
+pub use elastic::ElasticNormal;
 pub use friction::FrictionTable;
