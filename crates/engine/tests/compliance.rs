@@ -76,6 +76,31 @@ fn a_resting_block_sinks_by_its_weight_over_the_stiffness() {
     assert!(w.bodies.velocity[1].length() < 1e-9);
 }
 
+/// An overlap is pushed back by the contact's spring whatever the contact carried before: the
+/// cube starts 0.2 mm deep in the floor, at rest and with no impulse to remember, and comes
+/// back to its static sink `m g / (4 k)`. A law on the change of force from the last step's
+/// impulse leaves it 0.2 mm deep. The contact only pushes, so it lets go while the dashpot
+/// would pull, with the spring not yet relaxed: even critically damped, the released spring
+/// throws the cube 0.175 mm up (measured; the bound is the depth it started from).
+#[test]
+fn an_overlap_is_pushed_back_by_the_spring() {
+    let k = 1e6;
+    let (mut w, m) = cube_on_floor(Some(k), 0.5);
+    w.bodies.position[1].z -= 2e-4;
+    let rest = 0.05 - m * G / (4.0 * k);
+    let mut highest = f64::NEG_INFINITY;
+    for _ in 0..3000 {
+        w.step();
+        highest = highest.max(w.bodies.position[1].z);
+    }
+    let z = w.bodies.position[1].z;
+    assert!(
+        (z - rest).abs() <= 1e-3 * (0.05 - rest),
+        "z = {z}, rest at {rest}"
+    );
+    assert!(highest <= 0.05 + 2e-4, "thrown up to z = {highest}");
+}
+
 /// The rigid law keeps the same cube where it is (to rounding), and `contact_stiffness =
 /// None` is the rigid law: the same bits as a world built before the setting existed.
 #[test]
