@@ -248,15 +248,15 @@ class Simulation:
         a dict with ``W`` (``scipy.sparse.bsr_matrix`` of 3×3 blocks when scipy is
         installed, else ``None``), its parts ``indptr``, ``indices``, ``blocks``, ``q``
         ``(n, 3)``, ``mu`` ``(n,)``, ``scale`` (the norm the residual is relative to) and
-        ``compliance`` ``(n,)`` (each compliant contact's ``c``, already in ``W``: the spring and
-        dashpot of ``contact_stiffness`` and ``contact_damping``; 0 for rigid ones).
+        ``compliance`` (``c = 1/(k h²)`` of compliant contacts, already in ``W`` and ``q``; 0
+        for rigid ones).
 
         Its global form (FCLIB's ``fclib_global``, Siconos' ``GlobalFrictionContactProblem``)
         over the ``bodies`` the contacts move (world indices, 6 velocities each: linear then
         angular): ``v = v_free + M_inv H r``, ``u = H.T v + b``, so ``W = H.T M_inv H`` (plus
         ``compliance`` on the normal rows) and ``q = H.T v_free + b`` (``b``: the driven and
-        fixed bodies' motion and the gap shift, which for compliant contacts acts on overlaps
-        too).
+        fixed bodies' motion, the gap shift and ``-compliance`` times the previous step's normal
+        impulses).
         ``H`` ``(6 nb, 3 n)``, ``M`` (masses, world inertia tensors) and ``M_inv`` (the
         solver's: zero on a degree of freedom a drive imposes) are scipy sparse matrices,
         ``v_free`` ``(6 nb,)``; their parts ``H_blocks``, ``H_body``, ``H_contact``, ``mass``,

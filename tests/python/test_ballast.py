@@ -448,12 +448,11 @@ def test_global_form_of_the_contact_problem():
     H, M, M_inv, W = p["H"], p["M"], p["M_inv"], p["W"]
     assert H.shape == (6 * nb, 3 * n) and M.shape == (6 * nb, 6 * nb)
     assert p["v_free"].shape == (6 * nb,)
-    # W = Hᵀ M⁻¹ H (the grains are free bodies: M⁻¹ is M's inverse), plus each contact's
-    # compliance on its normal row (0 for rigid contacts).
-    assert p["compliance"].shape == (n,)
+    # W = Hᵀ M⁻¹ H (the grains are free bodies: M⁻¹ is M's inverse), plus the compliance of
+    # the contacts' normal law on the normal rows (0 for rigid contacts).
     normal = np.zeros(3 * n)
-    normal[0::3] = p["compliance"]
-    W2 = (H.T @ M_inv @ H).toarray() + np.diag(normal)
+    normal[0::3] = 1.0
+    W2 = (H.T @ M_inv @ H).toarray() + p["compliance"] * np.diag(normal)
     assert np.abs(W.toarray() - W2).max() <= 1e-12 * np.abs(W2).max()
     assert np.abs((M @ M_inv).toarray() - np.eye(6 * nb)).max() < 1e-9
     # q = Hᵀ v_free + b, where b is the gap shift alone against the fixed walls.

@@ -14,7 +14,7 @@
 use crate::bodies::{BodyKind, BodySet};
 use crate::contacts::ContactSet;
 use crate::detection::{Detector, RawContact};
-use crate::laws::{ElasticNormal, FrictionTable};
+use crate::laws::FrictionTable;
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::build_local_problems;
@@ -46,19 +46,12 @@ pub struct StepSettings {
     #[serde(default = "default_reuse_distance")]
     pub reuse_distance: f64,
     /// Normal stiffness of a contact point (N/m); `None`: rigid contacts (Moreau-Jean's
-    /// Signorini law). With a stiffness the normal force is a spring on the predicted overlap
-    /// and a dashpot on the approach ([`crate::laws::ElasticNormal`]), so forces in a jammed,
-    /// hyperstatic packing are those of stiff elastic grains instead of any of the rigid law's
-    /// unbounded set of self-stresses.
+    /// Signorini law). With a stiffness the normal law is the rate form of an elastic contact:
+    /// over a step the normal force changes by `k` times the approach `h uₙ` (see
+    /// [`crate::solver::Nlgs`]), so forces in a jammed, hyperstatic packing are those of stiff
+    /// elastic grains instead of any of the rigid law's unbounded set of self-stresses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
-    /// Damping ratio ζ of compliant contacts' dashpot (1: critical, an impact without
-    /// rebound); unused with rigid contacts.
-    #[serde(
-        default = "default_contact_damping",
-        skip_serializing_if = "is_default_contact_damping"
-    )]
-    pub contact_damping: f64,
     /// NLGS settings.
     pub solver: SolverSettings,
     /// Overlap post-stabilisation.
@@ -91,32 +84,10 @@ impl Default for StepSettings {
             match_fraction: 0.1,
             reuse_distance: default_reuse_distance(),
             contact_stiffness: None,
-            contact_damping: default_contact_damping(),
             solver: SolverSettings::default(),
             correction: CorrectionSettings::default(),
             ddm: None,
         }
-    }
-}
-
-/// Default [`StepSettings::contact_damping`]: critical damping.
-pub fn default_contact_damping() -> f64 {
-    1.0
-}
-
-fn is_default_contact_damping(z: &f64) -> bool {
-    *z == default_contact_damping()
-}
-
-/// Checks a scenario's `simulation.contact_damping` (the damping ratio ζ ≥ 0 of compliant
-/// contacts).
-pub fn check_contact_damping(z: f64) -> Result<f64, String> {
-    if z.is_finite() && z >= 0.0 {
-        Ok(z)
-    } else {
-        Err(format!(
-            "simulation.contact_damping = {z} must be a damping ratio ≥ 0 (1: critical)"
-        ))
     }
 }
 
@@ -332,18 +303,11 @@ impl World {
         Nlgs {
             settings: self.settings.solver.clone(),
             h_theta: h * self.settings.theta,
-            overlap_factor: self.elastic().map_or(0.0, |law| law.overlap_factor()),
+            compliance: self
+                .settings
+                .contact_stiffness
+                .map_or(0.0, |k| 1.0 / (k * h * h)),
         }
-    }
-
-    /// The compliant normal law of this world's steps (`None`: rigid contacts).
-    pub fn elastic(&self) -> Option<ElasticNormal> {
-        self.settings.contact_stiffness.map(|k| ElasticNormal {
-            stiffness: k,
-            damping: self.settings.contact_damping,
-            h: self.settings.dt,
-            theta: self.settings.theta,
-        })
     }
 
     /// Candidate pairs whose contact manifold the last detection reused from the step before
@@ -401,7 +365,7 @@ impl World {
             &self.scratch.locals,
             &self.scratch.solver_bodies,
             nlgs.h_theta,
-            nlgs.overlap_factor,
+            nlgs.compliance,
         )
     }
 
@@ -522,12 +486,11 @@ impl World {
         times.other += lap.lap();
 
         // 3. Local problems.
-        // Without warm start the solver starts from zero impulses.
-        let elastic = self.elastic();
+        // Without warm start the solver starts from zero impulses; the previous ones stay the
+        // compliant law's memory.
         build_local_problems(
             &self.contacts,
             self.settings.solver.warm_start,
-            elastic.as_ref(),
             b,
             &self.scratch.solver_bodies,
             &self.scratch.attach,

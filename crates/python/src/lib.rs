@@ -597,7 +597,7 @@ fn problem_dict<'py>(py: Python<'py>, p: &ContactProblem) -> PyResult<Bound<'py,
     d.set_item("q", vec3_array(py, &p.q))?;
     d.set_item("mu", p.mu.clone().into_pyarray(py))?;
     d.set_item("scale", p.scale)?;
-    d.set_item("compliance", p.compliance.clone().into_pyarray(py))?;
+    d.set_item("compliance", p.compliance)?;
     Ok(d)
 }
 
@@ -680,7 +680,7 @@ fn solve_fc3d_blocks<'py>(
         q: qv,
         mu,
         scale,
-        compliance: vec![0.0; n],
+        compliance: 0.0,
     };
     let mut r = match &r0 {
         Some(a) => vec3s(a, "r0")?,

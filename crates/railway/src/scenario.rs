@@ -63,9 +63,6 @@ pub struct TrackSimulation {
     /// contacts (see `ballast_engine::world::StepSettings::contact_stiffness`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
-    /// Damping ratio of compliant contacts (see
-    /// `ballast_engine::world::StepSettings::contact_damping`).
-    pub contact_damping: f64,
     /// Steps to run; `None` = the whole cycle.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub steps: Option<u64>,
@@ -90,7 +87,6 @@ impl Default for TrackSimulation {
             alert: DEFAULT_ALERT,
             reuse_distance: ballast_engine::world::default_reuse_distance(),
             contact_stiffness: None,
-            contact_damping: ballast_engine::world::default_contact_damping(),
             steps: None,
             // Every 20 ms and 0.1 s of the default cycle.
             output_interval: 25,
@@ -451,14 +447,6 @@ impl TrackScenario {
             )
             .into());
         }
-        if ballast_engine::world::check_contact_damping(s.contact_damping).is_err() {
-            return Err(refuse(
-                "simulation.contact_damping",
-                s.contact_damping,
-                "a damping ratio ≥ 0 (1: critical)",
-            )
-            .into());
-        }
         if s.output_interval == 0 {
             return Err(refuse("simulation.output_interval", 0, "≥ 1 step").into());
         }
@@ -549,7 +537,6 @@ impl TrackScenario {
                 self.simulation.contact_stiffness,
             )
             .unwrap_or(None),
-            contact_damping: self.simulation.contact_damping,
             solver: self.solver.clone(),
             correction: self.correction.clone(),
             ddm: self.ddm.clone(),

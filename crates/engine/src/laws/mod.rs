@@ -2,9 +2,7 @@
 //! and the exact solver of the local 3×3 problem.
 
 pub mod coulomb;
-pub mod elastic;
 pub mod friction;
 
 pub use coulomb::{solve_local, ContactStatus};
-pub use elastic::ElasticNormal;
 pub use friction::FrictionTable;

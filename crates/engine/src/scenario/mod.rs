@@ -10,7 +10,6 @@
 //! alert = 1e-3         # m
 //! reuse_distance = 1e-5 # m: contact geometry reused until a grain moved this far (0 = never)
 //! contact_stiffness = 1e7 # N/m per contact point (absent or inf = rigid contacts)
-//! contact_damping = 1.0   # damping ratio of compliant contacts (1 = critical)
 //! output_interval = 50 # steps between rows of series.csv
 //! checkpoint_interval = 1000 # steps between checkpoints (0 = only at the end)
 //! vtk_interval = 500   # steps between ParaView frames (0 = none)
@@ -109,9 +108,6 @@ pub struct Simulation {
     /// `StepSettings::contact_stiffness`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
-    /// Damping ratio of compliant contacts (see `StepSettings::contact_damping`).
-    #[serde(default = "crate::world::default_contact_damping")]
-    pub contact_damping: f64,
     #[serde(default = "default_interval")]
     pub output_interval: u64,
     /// Steps between checkpoints (one is also written at the end of a run); 0 = only at the end.
@@ -544,7 +540,6 @@ impl Scenario {
             ));
         }
         crate::world::check_contact_stiffness(s.contact_stiffness).map_err(ScenarioError)?;
-        crate::world::check_contact_damping(s.contact_damping).map_err(ScenarioError)?;
         if s.output_interval == 0 {
             return err("simulation.output_interval = 0 must be ≥ 1 step");
         }
@@ -871,7 +866,6 @@ impl Scenario {
             reuse_distance: s.reuse_distance,
             contact_stiffness: crate::world::check_contact_stiffness(s.contact_stiffness)
                 .unwrap_or(None),
-            contact_damping: s.contact_damping,
             solver: self.solver.clone(),
             correction: self.correction.clone(),
             ddm: self.ddm.clone(),

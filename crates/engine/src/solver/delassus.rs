@@ -7,7 +7,6 @@
 
 use crate::bodies::BodySet;
 use crate::contacts::ContactSet;
-use crate::laws::ElasticNormal;
 use crate::math::{skew, DMat3, DVec3, Sym3};
 
 /// What the solver knows of a body: current velocities and inverse mass properties (zero for
@@ -43,9 +42,9 @@ pub struct LocalProblem {
     pub mu: f64,
     /// Current impulse `(r_n, r_t, r_s)`.
     pub r: DVec3,
-    /// Normal compliance `c` of the compliant law (0: a rigid contact), see
-    /// [`crate::laws::ElasticNormal`].
-    pub compliance: f64,
+    /// Normal impulse the contact carried at the end of the previous step (0 for a new
+    /// contact): the memory of the compliant normal law (see [`super::Nlgs`]).
+    pub r_prev: f64,
 }
 
 /// Access to the solver bodies a sweep works on: the whole array (monolithic NLGS), or the
@@ -139,7 +138,6 @@ pub(crate) fn delassus_block(
 pub(crate) fn build_local_problems(
     contacts: &ContactSet,
     warm_start: bool,
-    elastic: Option<&ElasticNormal>,
     bodies: &BodySet,
     solver_bodies: &[SolverBody],
     attach: &[u32],
@@ -167,7 +165,6 @@ pub(crate) fn build_local_problems(
                 &solver_bodies[b1],
                 &solver_bodies[b2],
             ));
-            let compliance = elastic.map_or(0.0, |law| law.compliance(w.xx()));
             LocalProblem {
                 body1: b1 as u32,
                 body2: b2 as u32,
@@ -184,7 +181,7 @@ pub(crate) fn build_local_problems(
                 } else {
                     DVec3::ZERO
                 },
-                compliance,
+                r_prev: contacts.impulse[k].x,
             }
         })
         .collect_into_vec(out);
@@ -215,7 +212,7 @@ pub(crate) fn contact_along_x(
         gap,
         mu,
         r: DVec3::ZERO,
-        compliance: 0.0,
+        r_prev: 0.0,
     }
 }
 
@@ -225,7 +222,7 @@ mod tests {
 
     /// The sweep streams the local problems from memory at large scale: their size is a
     /// budget (320 bytes with `W` and `W⁻¹` as full matrices and the frame's three vectors;
-    /// 8 of the 208 are the compliant law's `c`).
+    /// 8 of the 208 are the compliant law's memory).
     #[test]
     fn local_problem_size() {
         assert_eq!(std::mem::size_of::<LocalProblem>(), 208);

@@ -19,12 +19,19 @@
 //!
 //! # Compliant contacts
 //!
-//! With a contact stiffness the normal law is a spring and a dashpot on the predicted overlap
-//! ([`crate::laws::ElasticNormal`]): `0 ≤ rₙ ⊥ uₙ + s g + c rₙ ≥ 0` on an overlap `g ≤ 0`,
-//! each contact with its own compliance `c` ([`LocalProblem::compliance`]). It is the rigid
-//! law's local problem with `W_nn + c` and the gap shift extended to overlaps, so the exact
-//! local solver, the sweep and the residual are unchanged; `c = 0` is the rigid law, bit for
-//! bit. Why: in a jammed packing with `μ = 1` the rigid law's forces are not unique (wedged
+//! With a contact stiffness `k` ([`crate::world::StepSettings::contact_stiffness`]) the normal
+//! law is the rate form of an elastic contact: over the step the normal force `λ = rₙ/h`
+//! changes by `k` times the approach `−h uₙ`, from the force `r̄ₙ/h` the contact carried at the
+//! end of the previous step, and the contact opens when that would make it negative:
+//!
+//! ```text
+//! 0 ≤ rₙ  ⊥  uₙ + c (rₙ − r̄ₙ) ≥ 0,      c = 1 / (k h²)
+//! ```
+//!
+//! (with the gap shift of the rigid law on top). It is the rigid law's local problem with
+//! `W_nn + c` and `u_f,n − c r̄ₙ`, so the exact local solver, the sweep and the residual are
+//! unchanged; `c = 0` is the rigid law, bit for bit. A static load `F` deflects a contact by
+//! `F/k`. Why: in a jammed packing with `μ = 1` the rigid law's forces are not unique (wedged
 //! grains carry self-stresses of any size) and Gauss-Seidel drifts along them without
 //! converging; a stiffness picks the elastic solution, and a stiff one (granite corners under
 //! kN loads: about 1e7–1e8 N/m) changes the motion by micrometres.
@@ -56,9 +63,8 @@ pub struct Nlgs {
     pub settings: SolverSettings,
     /// `h θ`, the gap-prediction factor.
     pub h_theta: f64,
-    /// `k h` of the compliant law ([`crate::laws::ElasticNormal::overlap_factor`]; 0: rigid
-    /// contacts): an overlap `g` shifts the normal velocity by `k h c g`.
-    pub overlap_factor: f64,
+    /// Normal compliance `c = 1/(k h²)` of the compliant law (0: rigid contacts).
+    pub compliance: f64,
 }
 
 /// Sums carried through a sweep.
@@ -100,6 +106,8 @@ impl Nlgs {
         let u = c.velocity(v);
         let unloaded = c.r == DVec3::ZERO;
         let uf = if unloaded { u } else { u - c.w * c.r };
+        // The compliant law's free velocity (exactly `uf` for rigid contacts).
+        let uf = DVec3::new(uf.x - self.compliance * c.r_prev, uf.y, uf.z);
         let (rhat, status) = if c.gap + self.h_theta * uf.x > 0.0 {
             // An open contact that stays open (about 40 % of the updates in a dense bed):
             // nothing to apply, nothing to add to the sums.
@@ -111,7 +119,7 @@ impl Nlgs {
             // W⁻¹ is not stored: at large scale the sweep is bound by memory traffic, and the
             // inverse costs less than streaming 72 more bytes per contact.
             let mut w = c.w.to_mat();
-            w.x_axis.x += c.compliance;
+            w.x_axis.x += self.compliance;
             solve_local_from(&w, &w.inverse(), self.shifted(c, uf), c.mu, c.r)
         };
         let om = self.settings.relaxation;
@@ -137,14 +145,11 @@ impl Nlgs {
     /// contact with a positive gap may close it within the step (`g + hθ uₙ ≥ 0`) and no
     /// further. Signorini on `uₙ` itself would stop the bodies at the gap they had while the
     /// gap prediction calls that same state open: a contact then flips between the two from
-    /// sweep to sweep, a limit cycle Gauss-Seidel never leaves. A compliant contact's overlap
-    /// shifts it by `k h c g` (its spring pushes back).
+    /// sweep to sweep, a limit cycle Gauss-Seidel never leaves.
     #[inline(always)]
     fn shifted(&self, c: &LocalProblem, u: DVec3) -> DVec3 {
         if c.gap > 0.0 {
             DVec3::new(u.x + c.gap / self.h_theta, u.y, u.z)
-        } else if c.compliance > 0.0 {
-            DVec3::new(u.x + self.overlap_factor * c.compliance * c.gap, u.y, u.z)
         } else {
             u
         }
@@ -152,16 +157,14 @@ impl Nlgs {
 
     /// Natural-map residual contribution `‖·‖²` of contact α at the current state, on the
     /// shifted velocity (see [`Nlgs::update_contact`]) and, for compliant contacts, on
-    /// `uₙ + c rₙ`; an open contact with no impulse contributes nothing, one with an
+    /// `uₙ + c (rₙ − r̄ₙ)`; an open contact with no impulse contributes nothing, one with an
     /// impulse `‖W_nn r‖`.
     #[inline]
     pub(crate) fn residual2<B: BodyAccess + ?Sized>(&self, c: &LocalProblem, v: &B) -> f64 {
         let mut u = c.velocity(v);
-        if c.compliance > 0.0 {
-            u.x += c.compliance * c.r.x;
-        }
+        u.x += self.compliance * (c.r.x - c.r_prev);
         // ρ = 1/W_nn makes `r − ρ u` consistent in units (N·s); dividing by ρ gives m/s.
-        let rho = 1.0 / (c.w.xx() + c.compliance);
+        let rho = 1.0 / (c.w.xx() + self.compliance);
         (natural_map_residual(c.r, self.shifted(c, u) * rho, c.mu) / rho).powi(2)
     }
 
@@ -340,7 +343,7 @@ mod tests {
         let nlgs = Nlgs {
             settings: SolverSettings::default(),
             h_theta: 5e-4,
-            overlap_factor: 0.0,
+            compliance: 0.0,
         };
         let terms: Vec<f64> = locals
             .iter()

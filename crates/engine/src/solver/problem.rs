@@ -13,10 +13,10 @@
 //! Signorini-Coulomb law on `(W, q, μ)` is the engine's law, so any solver of that standard
 //! problem (Siconos' and LMGC90's included) solves the step's contacts.
 //!
-//! With a contact stiffness `k` (the compliant normal law, [`crate::laws::ElasticNormal`]),
-//! the law `uₙ + s g + c_α rₙ ≥ 0` of an overlap is folded in the same way: each contact's
-//! compliance `c_α` is added to its diagonal block's normal entry and the overlap's shift
-//! `s g = k h c_α g` to `qₙ`, so the standard problem on `(W, q, μ)` is again the engine's.
+//! With a contact stiffness `k` (the compliant normal law of [`super::Nlgs`]), the law
+//! `uₙ + c (rₙ − r̄ₙ) ≥ 0` with `c = 1/(k h²)` and `r̄ₙ` the previous step's normal impulse is
+//! folded in the same way: `c` is added to every diagonal block's normal entry and `−c r̄ₙ` to
+//! `qₙ`, so the standard problem on `(W, q, μ)` is again the engine's.
 //!
 //! `W` is assembled as a sparse symmetric matrix of 3×3 blocks: block `(α, β)` is
 //!
@@ -93,8 +93,8 @@ pub struct ContactProblem {
     /// `‖Hᵀ V_free‖` (without the gap shift): the scale of the engine's relative
     /// natural-map residual.
     pub scale: f64,
-    /// Each contact's normal compliance `c_α` included in `W` (0: rigid contacts).
-    pub compliance: Vec<f64>,
+    /// The normal compliance `c = 1/(k h²)` included in `W` and `q` (0: rigid contacts).
+    pub compliance: f64,
 }
 
 /// Lever arm, sign and body of one side of a contact, for the assembly.
@@ -108,13 +108,13 @@ struct Side {
 impl ContactProblem {
     /// Assembles the problem of `locals` (the step's local problems) on the free velocities
     /// `v_free` (the solver bodies before any impulse), with the gap-prediction factor
-    /// `h_theta = h θ` and the compliant law's `overlap_factor` `k h` (0: rigid). Deterministic:
+    /// `h_theta = h θ` and the normal compliance `compliance` (0: rigid). Deterministic:
     /// blocks are summed in body order.
     pub(crate) fn assemble(
         locals: &[LocalProblem],
         v_free: &[SolverBody],
         h_theta: f64,
-        overlap_factor: f64,
+        compliance: f64,
     ) -> Self {
         let n = locals.len();
         // The contacts each writable body carries, in contact order.
@@ -182,20 +182,19 @@ impl ContactProblem {
             .iter()
             .zip(free)
             .map(|(c, u)| {
+                let un = u.x - compliance * c.r_prev;
                 if c.gap > 0.0 {
-                    DVec3::new(u.x + c.gap / h_theta, u.y, u.z)
-                } else if c.compliance > 0.0 {
-                    DVec3::new(u.x + overlap_factor * c.compliance * c.gap, u.y, u.z)
+                    DVec3::new(un + c.gap / h_theta, u.y, u.z)
                 } else {
-                    u
+                    DVec3::new(un, u.y, u.z)
                 }
             })
             .collect();
-        for (a, c) in locals.iter().enumerate() {
-            if c.compliance > 0.0 {
+        if compliance > 0.0 {
+            for a in 0..n {
                 let range = w.row_start[a]..w.row_start[a + 1];
                 if let Ok(k) = w.cols[range.clone()].binary_search(&(a as u32)) {
-                    w.blocks[range.start + k].x_axis.x += c.compliance;
+                    w.blocks[range.start + k].x_axis.x += compliance;
                 }
             }
         }
@@ -204,7 +203,7 @@ impl ContactProblem {
             q,
             mu: locals.iter().map(|c| c.mu).collect(),
             scale,
-            compliance: locals.iter().map(|c| c.compliance).collect(),
+            compliance,
         }
     }
 
@@ -323,8 +322,8 @@ pub struct HBlock {
 ///
 /// where `b` gathers what does not depend on those bodies: the motion of driven and fixed
 /// bodies and the gap shift of [`ContactProblem`]. `M⁻¹` is the solver's: zero on a degree of
-/// freedom a drive imposes. With a contact stiffness, `W = Hᵀ M⁻¹ H + C` (`C` the contacts'
-/// compliances `c_α` on their normal rows, [`GlobalProblem::compliance`]) and `b` holds the shift of overlaps too.
+/// freedom a drive imposes. With a contact stiffness, `W = Hᵀ M⁻¹ H + c Iₙ` (`c` on the normal
+/// rows, [`GlobalProblem::compliance`]) and `b` holds `−c r̄ₙ`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct GlobalProblem {
     /// The bodies the contacts move (world indices, increasing).
@@ -339,8 +338,8 @@ pub struct GlobalProblem {
     pub h: Vec<HBlock>,
     /// `b = q − Hᵀ v_free`, per contact.
     pub b: Vec<DVec3>,
-    /// Each contact's normal compliance `c_α` of [`ContactProblem::compliance`].
-    pub compliance: Vec<f64>,
+    /// The normal compliance `c` of [`ContactProblem::compliance`].
+    pub compliance: f64,
 }
 
 impl GlobalProblem {
@@ -407,7 +406,7 @@ impl GlobalProblem {
             bodies,
             h,
             b,
-            compliance: problem.compliance.clone(),
+            compliance: problem.compliance,
         }
     }
 
