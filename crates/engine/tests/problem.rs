@@ -133,14 +133,18 @@ fn assembled_delassus_matches_the_matrix_free_operator() {
 
 #[test]
 fn nlgs_on_the_assembled_problem_reproduces_the_engine_sweep() {
-    // Rigid contacts, and compliant ones (the law's `c` and `r̄ₙ` folded into `W` and `q`).
+    // Rigid contacts, and compliant ones (the law's `c`, `r̄ₙ` and overlap recovery folded
+    // into `W` and `q`).
     for stiffness in [None, Some(1e6)] {
         assembled_sweep_matches(stiffness);
     }
 }
 
 fn assembled_sweep_matches(stiffness: Option<f64>) {
-    let w = prepared_pile_with(stiffness);
+    let mut w = prepared_pile_with(stiffness);
+    // No slop: the overlap recovery's speeds are part of the compliant problem.
+    w.settings.overlap_recovery = 0.2;
+    w.settings.overlap_slop = 0.0;
     assert_eq!(w.contact_problem().compliance > 0.0, stiffness.is_some());
     let settings = SolverSettings {
         tolerance: 1e-300,
@@ -239,7 +243,10 @@ fn global_form_gives_w_and_q_through_the_bodies() {
 }
 
 fn global_form_matches(stiffness: Option<f64>) {
-    let w = prepared_pile_with(stiffness);
+    let mut w = prepared_pile_with(stiffness);
+    // No slop: every overlap deeper than its deflection gets a recovery speed in `q`.
+    w.settings.overlap_recovery = 0.2;
+    w.settings.overlap_slop = 0.0;
     let p = w.contact_problem();
     let g = w.global_problem(&p);
     let n = p.len();
@@ -278,14 +285,35 @@ fn global_form_matches(stiffness: Option<f64>) {
             "Hᵀ M⁻¹ H r = {a} but W r = {b}"
         );
     }
-    // The walls are fixed, so q − Hᵀ v_free is the gap shift alone (less c r̄ₙ).
-    let h_theta = w.settings.dt * w.settings.theta;
+    // The walls are fixed, so q − Hᵀ v_free is the gap shift alone (less c r̄ₙ, less the
+    // overlap recovery's speed `min(β, h √(k W_nn) / 16) / h · (δ − r̄ₙ/(k h))⁺`).
+    let h = w.settings.dt;
+    let h_theta = h * w.settings.theta;
     let q_max = p.q.iter().map(|x| x.length()).fold(0.0, f64::max);
-    for (l, b) in w.local_problems().iter().zip(&g.b) {
-        let shift = DVec3::new(l.gap.max(0.0) / h_theta - c * l.r_prev, 0.0, 0.0);
+    let mut recovering = 0;
+    for (a, (l, b)) in w.local_problems().iter().zip(&g.b).enumerate() {
+        let recovery = match stiffness {
+            Some(k) if l.gap <= 0.0 => {
+                let excess = -l.gap - l.r_prev.max(0.0) / (k * h);
+                let w_nn = p.w.get(a, a).unwrap().x_axis.x - c;
+                let beta = w
+                    .settings
+                    .overlap_recovery
+                    .min(h * (k * w_nn).sqrt() / 16.0);
+                beta / h * excess.max(0.0)
+            }
+            _ => 0.0,
+        };
+        recovering += usize::from(recovery > 0.0);
+        let shift = DVec3::new(l.gap.max(0.0) / h_theta - c * l.r_prev - recovery, 0.0, 0.0);
         assert!(
             (*b - shift).length() <= 1e-12 * q_max,
             "b = {b}, gap shift {shift}"
         );
     }
+    assert_eq!(
+        recovering > 10,
+        stiffness.is_some(),
+        "{recovering} recovering"
+    );
 }

@@ -6,6 +6,9 @@
 //! steps = 2205          # default: the whole cycle, tamping.duration / dt
 //! alert = 4e-4          # m
 //! reuse_distance = 1e-5 # m, contact geometry reused until a grain moved this far (0 = never)
+//! contact_stiffness = 1e7 # N/m per contact point (default: rigid contacts)
+//! overlap_recovery = 0.2  # compliant contacts: fraction of the overlap beyond F/k removed per step (engine default: 0)
+//! overlap_slop = 2.5e-4   # m, excess overlap the recovery tolerates
 //! output_interval = 25  # steps between rows of series.csv
 //! vtk_interval = 125    # steps between ParaView frames (0 = none)
 //! checkpoint_interval = 500
@@ -63,6 +66,11 @@ pub struct TrackSimulation {
     /// contacts (see `ballast_engine::world::StepSettings::contact_stiffness`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
+    /// Overlap recovery β ∈ [0, 1] of the compliant law (see
+    /// `ballast_engine::world::StepSettings::overlap_recovery`).
+    pub overlap_recovery: f64,
+    /// Excess overlap over the elastic deflection the recovery tolerates (m).
+    pub overlap_slop: f64,
     /// Steps to run; `None` = the whole cycle.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub steps: Option<u64>,
@@ -87,6 +95,10 @@ impl Default for TrackSimulation {
             alert: DEFAULT_ALERT,
             reuse_distance: ballast_engine::world::default_reuse_distance(),
             contact_stiffness: None,
+            // Tines wedge grains against the block: there the rate form's overlaps drift by
+            // millimetres without it (BENCHMARKS.md, session 18).
+            overlap_recovery: 0.2,
+            overlap_slop: ballast_engine::world::default_overlap_slop(),
             steps: None,
             // Every 20 ms and 0.1 s of the default cycle.
             output_interval: 25,
@@ -447,6 +459,14 @@ impl TrackScenario {
             )
             .into());
         }
+        check_range(
+            "simulation.overlap_recovery",
+            s.overlap_recovery,
+            0.0,
+            1.0,
+            "",
+        )?;
+        check_range("simulation.overlap_slop", s.overlap_slop, 0.0, 0.1, "m")?;
         if s.output_interval == 0 {
             return Err(refuse("simulation.output_interval", 0, "≥ 1 step").into());
         }
@@ -528,15 +548,23 @@ impl TrackScenario {
 
     /// The engine's step settings.
     pub(crate) fn step_settings(&self) -> StepSettings {
+        let stiffness =
+            ballast_engine::world::check_contact_stiffness(self.simulation.contact_stiffness)
+                .unwrap_or(None);
         StepSettings {
             dt: self.simulation.dt,
             theta: self.simulation.theta,
             alert: self.simulation.alert,
             reuse_distance: self.simulation.reuse_distance,
-            contact_stiffness: ballast_engine::world::check_contact_stiffness(
-                self.simulation.contact_stiffness,
-            )
-            .unwrap_or(None),
+            contact_stiffness: stiffness,
+            // Inert for rigid contacts: kept at the engine's default there, so that a rigid
+            // run's checkpoints do not depend on it.
+            overlap_recovery: if stiffness.is_some() {
+                self.simulation.overlap_recovery
+            } else {
+                ballast_engine::world::default_overlap_recovery()
+            },
+            overlap_slop: self.simulation.overlap_slop,
             solver: self.solver.clone(),
             correction: self.correction.clone(),
             ddm: self.ddm.clone(),
@@ -661,6 +689,30 @@ mod tests {
     }
 
     /// The default bed keeps every tine 1.5 of the grading's top size (63 mm) from the walls.
+    /// Compliant track runs recover drifting overlaps by default; rigid ones keep the engine's
+    /// setting, so their checkpoints do not depend on an inert key.
+    #[test]
+    fn the_overlap_recovery_is_on_for_compliant_track_runs() {
+        let soft = TrackScenario::from_toml("[track]\n[simulation]\ncontact_stiffness = 1e7\n")
+            .unwrap()
+            .step_settings();
+        assert_eq!((soft.overlap_recovery, soft.overlap_slop), (0.2, 2.5e-4));
+        let off = "[track]\n[simulation]\ncontact_stiffness = 1e7\noverlap_recovery = 0\n";
+        let off = TrackScenario::from_toml(off).unwrap().step_settings();
+        assert_eq!(off.overlap_recovery, 0.0);
+        for rigid in [
+            "[track]\n",
+            "[track]\n[simulation]\ncontact_stiffness = inf\n",
+        ] {
+            let rigid = TrackScenario::from_toml(rigid).unwrap().step_settings();
+            assert_eq!(rigid.contact_stiffness, None);
+            assert_eq!(
+                rigid.overlap_recovery,
+                ballast_engine::world::default_overlap_recovery()
+            );
+        }
+    }
+
     #[test]
     fn default_tines_stay_clear_of_the_walls() {
         let d = TrackScenario::default_preset();

@@ -42,15 +42,16 @@ fn the_small_track_cycle_converges_on_nearly_every_step() {
          overlap {:.2} mm, compacity under the block {before:.3} → {after:.3}",
         deepest * 1e3
     );
-    // Measured: 243 of 4,700 (5.2 %; 84 % at dt = 4e-4 s with rigid contacts), largest residual
-    // 3.0e-2, largest overlap 2.98 mm, compacity 0.398 → 0.460. The bounds are those plus
-    // about 20 %: granular flow is chaotic, and a change that only reorders rounding moves
-    // such counts by that much (three grain packs of the same pile: 33 to 68 steps
-    // unconverged). These bounds hold this grain pack: the bed's other packs (`[ballast]
-    // seed` 4 and 5) give 479 and 248 steps unconverged, residuals up to 0.12 and 0.06, and
-    // overlaps of 3.45 and 8.9 mm (BENCHMARKS.md, session 16).
+    // Measured: 196 of 4,700 (4.2 %; 84 % at dt = 4e-4 s with rigid contacts), largest
+    // residual 0.157, largest overlap 3.31 mm, compacity 0.398 → 0.440 (without the overlap
+    // recovery: 243, 0.030, 2.98 mm, 0.460). Granular flow is chaotic, and a change that only
+    // reorders rounding moves such figures by tens of percent, so the bounds are set over the
+    // bed's five grain packs (`[ballast] seed` 3–7, BENCHMARKS.md, session 18): 166–582 steps
+    // unconverged (3.5–12.4 %), residuals 0.043–0.195, overlaps 1.25–7.46 mm. The unconverged
+    // bound holds this pack with a 40 % margin, the residual bound the worst pack's plus 25 %,
+    // and the overlap bound this pack's plus 20 % (seed 5's wedged grain reaches 7.46 mm).
     assert!(unconverged * 100 <= 6 * steps, "{unconverged} of {steps}");
-    assert!(worst <= 0.05, "largest residual {worst}");
-    assert!(deepest <= 3.5e-3, "largest overlap {deepest} m");
+    assert!(worst <= 0.25, "largest residual {worst}");
+    assert!(deepest <= 4e-3, "largest overlap {deepest} m");
     assert!(after >= 1.1 * before, "compacity {before} → {after}");
 }

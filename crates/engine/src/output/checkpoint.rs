@@ -1314,6 +1314,8 @@ mod tests {
             ",\"max_push\":null",
             ",\"guard\":false",
             ",\"rotation\":true",
+            ",\"overlap_recovery\":0.0",
+            ",\"overlap_slop\":0.00025",
         ] {
             assert!(old.settings_json.contains(added), "{}", old.settings_json);
             old.settings_json = old.settings_json.replace(added, "");

@@ -10,6 +10,8 @@
 //! alert = 1e-3         # m
 //! reuse_distance = 1e-5 # m: contact geometry reused until a grain moved this far (0 = never)
 //! contact_stiffness = 1e7 # N/m per contact point (absent or inf = rigid contacts)
+//! overlap_recovery = 0   # compliant law: fraction of the overlap beyond F/k removed per step
+//! overlap_slop = 2.5e-4  # m: excess overlap the recovery tolerates
 //! output_interval = 50 # steps between rows of series.csv
 //! checkpoint_interval = 1000 # steps between checkpoints (0 = only at the end)
 //! vtk_interval = 500   # steps between ParaView frames (0 = none)
@@ -108,6 +110,12 @@ pub struct Simulation {
     /// `StepSettings::contact_stiffness`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
+    /// Overlap recovery β ∈ [0, 1] of the compliant law (see `StepSettings::overlap_recovery`).
+    #[serde(default = "crate::world::default_overlap_recovery")]
+    pub overlap_recovery: f64,
+    /// Excess overlap the recovery tolerates (m; see `StepSettings::overlap_slop`).
+    #[serde(default = "crate::world::default_overlap_slop")]
+    pub overlap_slop: f64,
     #[serde(default = "default_interval")]
     pub output_interval: u64,
     /// Steps between checkpoints (one is also written at the end of a run); 0 = only at the end.
@@ -540,6 +548,8 @@ impl Scenario {
             ));
         }
         crate::world::check_contact_stiffness(s.contact_stiffness).map_err(ScenarioError)?;
+        crate::world::check_overlap_recovery(s.overlap_recovery, s.overlap_slop)
+            .map_err(ScenarioError)?;
         if s.output_interval == 0 {
             return err("simulation.output_interval = 0 must be ≥ 1 step");
         }
@@ -866,6 +876,8 @@ impl Scenario {
             reuse_distance: s.reuse_distance,
             contact_stiffness: crate::world::check_contact_stiffness(s.contact_stiffness)
                 .unwrap_or(None),
+            overlap_recovery: s.overlap_recovery,
+            overlap_slop: s.overlap_slop,
             solver: self.solver.clone(),
             correction: self.correction.clone(),
             ddm: self.ddm.clone(),

@@ -609,7 +609,7 @@ pub fn solve_and_correct(
             .zip(chunks.into_par_iter())
             .for_each(|(b, chunk)| {
                 for (t, l) in chunk.iter_mut().zip(&b.locals) {
-                    *t = l.velocity(pb).length_squared();
+                    *t = nlgs.scale2(l, pb);
                 }
             });
     }

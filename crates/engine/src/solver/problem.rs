@@ -16,7 +16,9 @@
 //! With a contact stiffness `k` (the compliant normal law of [`super::Nlgs`]), the law
 //! `uₙ + c (rₙ − r̄ₙ) ≥ 0` with `c = 1/(k h²)` and `r̄ₙ` the previous step's normal impulse is
 //! folded in the same way: `c` is added to every diagonal block's normal entry and `−c r̄ₙ` to
-//! `qₙ`, so the standard problem on `(W, q, μ)` is again the engine's.
+//! `qₙ`, so the standard problem on `(W, q, μ)` is again the engine's. The law's overlap
+//! recovery (a separation speed on overlaps deeper than the elastic deflection) is one more
+//! shift of `qₙ`.
 //!
 //! `W` is assembled as a sparse symmetric matrix of 3×3 blocks: block `(α, β)` is
 //!
@@ -30,7 +32,7 @@
 //! free velocity of the contacts with the drive impulses left at zero.
 
 use super::delassus::{LocalProblem, SolverBody};
-use super::nlgs::SolveReport;
+use super::nlgs::{Nlgs, SolveReport};
 use super::{SolverSettings, StopRule};
 use crate::laws::coulomb::{natural_map_residual, solve_local_from};
 use crate::math::{skew, DMat3, DVec3};
@@ -107,15 +109,11 @@ struct Side {
 
 impl ContactProblem {
     /// Assembles the problem of `locals` (the step's local problems) on the free velocities
-    /// `v_free` (the solver bodies before any impulse), with the gap-prediction factor
-    /// `h_theta = h θ` and the normal compliance `compliance` (0: rigid). Deterministic:
+    /// `v_free` (the solver bodies before any impulse), with `nlgs`'s law: its gap-prediction
+    /// factor `h θ`, its normal compliance (0: rigid) and its overlap recovery. Deterministic:
     /// blocks are summed in body order.
-    pub(crate) fn assemble(
-        locals: &[LocalProblem],
-        v_free: &[SolverBody],
-        h_theta: f64,
-        compliance: f64,
-    ) -> Self {
+    pub(crate) fn assemble(locals: &[LocalProblem], v_free: &[SolverBody], nlgs: &Nlgs) -> Self {
+        let compliance = nlgs.compliance;
         let n = locals.len();
         // The contacts each writable body carries, in contact order.
         let mut sides: Vec<Vec<Side>> = vec![Vec::new(); v_free.len()];
@@ -177,18 +175,15 @@ impl ContactProblem {
             w.row_start.push(w.cols.len());
         }
         let free: Vec<DVec3> = locals.iter().map(|c| c.velocity(v_free)).collect();
-        let scale = free.iter().map(|u| u.length_squared()).sum::<f64>().sqrt();
+        let scale = locals
+            .iter()
+            .map(|c| nlgs.scale2(c, v_free))
+            .sum::<f64>()
+            .sqrt();
         let q = locals
             .iter()
             .zip(free)
-            .map(|(c, u)| {
-                let un = u.x - compliance * c.r_prev;
-                if c.gap > 0.0 {
-                    DVec3::new(un + c.gap / h_theta, u.y, u.z)
-                } else {
-                    DVec3::new(un, u.y, u.z)
-                }
-            })
+            .map(|(c, u)| nlgs.shifted(c, DVec3::new(u.x - compliance * c.r_prev, u.y, u.z)))
             .collect();
         if compliance > 0.0 {
             for a in 0..n {
