@@ -107,7 +107,7 @@ impl Default for StepSettings {
 /// Default [`StepSettings::overlap_recovery`]: off, the rate form alone. It pays where
 /// driven tools wedge grains (the track model's default is 0.2); in a pile settling from a
 /// pour, whose overlaps come from impacts that the position correction heals, it left 1.4
-/// times as many steps unconverged over seven grain packs (BENCHMARKS.md, session 18).
+/// times as many steps unconverged over seven grain packs (BENCHMARKS.md, the overlap recovery).
 pub fn default_overlap_recovery() -> f64 {
     0.0
 }

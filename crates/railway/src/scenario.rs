@@ -96,7 +96,7 @@ impl Default for TrackSimulation {
             reuse_distance: ballast_engine::world::default_reuse_distance(),
             contact_stiffness: None,
             // Tines wedge grains against the block: there the rate form's overlaps drift by
-            // millimetres without it (BENCHMARKS.md, session 18).
+            // millimetres without it (BENCHMARKS.md, the overlap recovery).
             overlap_recovery: 0.2,
             overlap_slop: ballast_engine::world::default_overlap_slop(),
             steps: None,

@@ -46,7 +46,7 @@ fn the_small_track_cycle_converges_on_nearly_every_step() {
     // residual 0.157, largest overlap 3.31 mm, compacity 0.398 → 0.440 (without the overlap
     // recovery: 243, 0.030, 2.98 mm, 0.460). Granular flow is chaotic, and a change that only
     // reorders rounding moves such figures by tens of percent, so the bounds are set over the
-    // bed's five grain packs (`[ballast] seed` 3–7, BENCHMARKS.md, session 18): 166–582 steps
+    // bed's five grain packs (`[ballast] seed` 3–7, BENCHMARKS.md): 166–582 steps
     // unconverged (3.5–12.4 %), residuals 0.043–0.195, overlaps 1.25–7.46 mm. The unconverged
     // bound holds this pack with a 40 % margin, the residual bound the worst pack's plus 25 %,
     // and the overlap bound this pack's plus 20 % (seed 5's wedged grain reaches 7.46 mm).

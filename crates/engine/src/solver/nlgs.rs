@@ -163,6 +163,7 @@ impl Nlgs {
     /// further. Signorini on `uₙ` itself would stop the bodies at the gap they had while the
     /// gap prediction calls that same state open: a contact then flips between the two from
     /// sweep to sweep, a limit cycle Gauss-Seidel never leaves.
+    ///
     /// On an overlapping compliant contact, the recovery's separation speed is subtracted.
     #[inline(always)]
     pub(crate) fn shifted(&self, c: &LocalProblem, u: DVec3) -> DVec3 {
