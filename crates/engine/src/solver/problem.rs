@@ -175,9 +175,11 @@ impl ContactProblem {
             w.row_start.push(w.cols.len());
         }
         let free: Vec<DVec3> = locals.iter().map(|c| c.velocity(v_free)).collect();
+        // `Nlgs::scale2` on the velocities just computed.
         let scale = locals
             .iter()
-            .map(|c| nlgs.scale2(c, v_free))
+            .zip(&free)
+            .map(|(c, u)| u.length_squared() + nlgs.recovery_speed(c).powi(2))
             .sum::<f64>()
             .sqrt();
         let q = locals
