@@ -434,6 +434,70 @@ fn resumed_track_run_is_bit_identical_to_a_straight_one() {
     );
 }
 
+/// `quality.csv` names every step that missed the tolerance or overlapped by more than 1 mm:
+/// with a `series.csv` row per step, its rows are exactly those steps' rows (the same values),
+/// the deepest overlap's two bodies added; as many unconverged rows as `summary.json` counts;
+/// a resumed run's file equals a straight run's.
+#[test]
+fn quality_csv_names_every_unconverged_or_deep_step() {
+    let r = runs();
+    let read = |dir: &Path| std::fs::read_to_string(dir.join("quality.csv")).unwrap();
+    let (qc, qs) = (read(&r.chained), read(&r.straight));
+    assert_eq!(qc, qs);
+    let mut lines = qs.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(
+        header,
+        [
+            "step",
+            "time_s",
+            "contacts",
+            "iterations",
+            "quad",
+            "residual",
+            "converged",
+            "max_penetration_m",
+            "body1",
+            "body2"
+        ]
+    );
+    let s = Series::read(&r.straight);
+    let (conv, pen) = (s.col("converged"), s.col("max_penetration_m"));
+    let expected: Vec<&Vec<f64>> = s
+        .rows
+        .iter()
+        .filter(|row| row[conv] == 0.0 || row[pen] > 1e-3)
+        .collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), expected.len());
+    let unconverged = rows.iter().filter(|q| q[6] == "0").count() as u64;
+    let sum = summary(&r.straight).unwrap();
+    assert_eq!(
+        Some(unconverged),
+        sum["solver"]["steps_not_converged"].as_u64()
+    );
+    assert!(
+        unconverged > 0,
+        "the bed should leave some step unconverged"
+    );
+    let grains_and_all = sum["bodies"].as_u64().unwrap();
+    for (q, e) in rows.iter().zip(&expected) {
+        // The first eight columns are series.csv's, printed the same way.
+        for (j, name) in header[..8].iter().enumerate() {
+            let v: f64 = q[j].parse().unwrap();
+            assert_eq!(v, e[s.col(name)], "{name} in {q:?}");
+        }
+        let [b1, b2] = [q[8], q[9]].map(|b| b.parse::<u64>().ok());
+        if e[pen] > 0.0 {
+            let (b1, b2) = (b1.unwrap(), b2.unwrap());
+            assert!(b1 != b2 && b1.max(b2) < grains_and_all, "{q:?}");
+        } else {
+            assert_eq!((b1, b2), (None, None), "{q:?}");
+        }
+    }
+    eprintln!("{} steps flagged, {unconverged} unconverged", rows.len());
+}
+
 /// Checks one run's `series.csv` against the scenario and its `summary.json`.
 fn check_series(r: &Runs, dir: &Path) {
     let s = Series::read(dir);

@@ -835,13 +835,15 @@ fn report_markdown(
             text("/solver/norm")
         ),
     );
+    let not_converged = text("/solver/steps_not_converged");
+    let listed = if not_converged == "0" {
+        ""
+    } else {
+        " (each in `quality.csv`)"
+    };
     row(
         "steps not converged",
-        format!(
-            "{} of {}",
-            text("/solver/steps_not_converged"),
-            text("/steps")
-        ),
+        format!("{not_converged} of {}{listed}", text("/steps")),
     );
     row(
         "contact points per step (mean / max)",

@@ -14,7 +14,8 @@ use ballast_engine::output::checkpoint::{
 };
 use ballast_engine::output::vtk::VtkWriter;
 use ballast_engine::output::{
-    json_number, naming, series_row, write_atomic, RunStats, Summary, SERIES_HEADER,
+    json_number, naming, quality_row, series_row, write_atomic, RunStats, Summary, QUALITY_HEADER,
+    SERIES_HEADER,
 };
 use ballast_engine::scenario::Scenario;
 use ballast_engine::solver::DdmSettings;
@@ -274,10 +275,11 @@ fn apply_subdomains(ddm: &mut Option<DdmSettings>, dims: Option<[usize; 3]>) {
 }
 
 /// The files and folders a run writes in its folder (all that `--overwrite` deletes).
-const RUN_FILES: [&str; 11] = [
+const RUN_FILES: [&str; 12] = [
     "scenario.toml",
     "summary.json",
     "series.csv",
+    "quality.csv",
     "report.md",
     "grains.pvd",
     "bodies.pvd",
@@ -292,7 +294,7 @@ const RUN_FILES: [&str; 11] = [
 /// with the number of checkpoints.
 fn previous_run(out: &Path) -> Vec<String> {
     let mut found = Vec::new();
-    for name in ["scenario.toml", "summary.json", "series.csv"] {
+    for name in ["scenario.toml", "summary.json", "series.csv", "quality.csv"] {
         if out.join(name).exists() {
             found.push(name.to_string());
         }
@@ -681,6 +683,8 @@ impl Job {
         let io = |e: std::io::Error| Failure::Io(format!("write error in {}: {e}", out.display()));
         let series_path = out.join("series.csv");
         let series_error = |e: std::io::Error| write_error(&series_path, e);
+        let quality_path = out.join("quality.csv");
+        let quality_error = |e: std::io::Error| write_error(&quality_path, e);
         let ckpt_dir = out.join("checkpoints");
         let mut header = SERIES_HEADER.to_string();
         if let Some(t) = track {
@@ -708,7 +712,7 @@ impl Job {
             }
             line
         };
-        let (mut series, mut vtk) = if o.resume {
+        let (mut series, mut quality, mut vtk) = if o.resume {
             let no_checkpoint = || {
                 format!(
                     "{}: no valid checkpoint in {}",
@@ -767,8 +771,16 @@ impl Job {
             write_atomic(&series_path, rows_up_to(&old, &header, r.step).as_bytes())
                 .map_err(series_error)?;
             let f = SeriesFile::open(&series_path).map_err(series_error)?;
+            // A folder written before quality.csv existed has none: it starts empty.
+            let old = std::fs::read_to_string(&quality_path).unwrap_or_default();
+            write_atomic(
+                &quality_path,
+                rows_up_to(&old, QUALITY_HEADER, r.step).as_bytes(),
+            )
+            .map_err(quality_error)?;
+            let q = SeriesFile::open(&quality_path).map_err(quality_error)?;
             let vtk = VtkWriter::resume(out, world.time).map_err(named_write_error)?;
-            (f, vtk)
+            (f, q, vtk)
         } else {
             claim_folder(out, o.overwrite, names)?;
             *stats = RunStats::default();
@@ -777,11 +789,14 @@ impl Job {
                 .map_err(|e| write_error(&scenario_path, e))?;
             write_atomic(&series_path, format!("{header}\n").as_bytes()).map_err(series_error)?;
             let f = SeriesFile::open(&series_path).map_err(series_error)?;
+            write_atomic(&quality_path, format!("{QUALITY_HEADER}\n").as_bytes())
+                .map_err(quality_error)?;
+            let q = SeriesFile::open(&quality_path).map_err(quality_error)?;
             let mut vtk = VtkWriter::new(out).map_err(named_write_error)?;
             if vtk_interval > 0 {
                 vtk.write_frame(world).map_err(named_write_error)?;
             }
-            (f, vtk)
+            (f, q, vtk)
         };
         std::fs::create_dir_all(&ckpt_dir).map_err(io)?;
         let start = world.step_index;
@@ -825,6 +840,7 @@ impl Job {
                 series
                     .append(&row(&r, world, false))
                     .map_err(series_error)?;
+                quality.append(&quality_row(&r)).map_err(quality_error)?;
                 let value = summary_json(world, stats, o.threads, track, None, Some(&d))?;
                 write_summary_and_report(out, source, text, &value, observer)?;
                 return Err(diverged(&d, out, names));
@@ -843,6 +859,9 @@ impl Job {
             // What the step writes. A write that fails (a full disk) stops the run here: the
             // rows and checkpoints written so far are whole, so a resume continues it.
             let written = (|| -> Result<(), Failure> {
+                if !r.solve.converged || r.max_penetration > OVERLAP_REPORT {
+                    quality.append(&quality_row(&r)).map_err(quality_error)?;
+                }
                 if k % output_interval == 0 || k == steps {
                     // Written row by row: a killed run keeps every row it computed.
                     series.append(&row(&r, world, true)).map_err(series_error)?;
@@ -1042,9 +1061,9 @@ impl SeriesFile {
     }
 }
 
-/// `series.csv` for a run resumed at step `step`: `header`, then the rows of `old` (the
-/// file the interrupted run left) up to that step. Whole rows only: a run killed in the middle
-/// of a row leaves it cut, perhaps in its step number.
+/// `series.csv` (or `quality.csv`) for a run resumed at step `step`: `header`, then the rows
+/// of `old` (the file the interrupted run left) up to that step. Whole rows only: a run killed
+/// in the middle of a row leaves it cut, perhaps in its step number.
 fn rows_up_to(old: &str, header: &str, step: u64) -> String {
     let columns = header.split(',').count();
     let mut text = format!("{header}\n");

@@ -175,6 +175,32 @@ pub fn naming(path: &Path, e: std::io::Error) -> std::io::Error {
 /// Header of `series.csv` (units in brackets).
 pub const SERIES_HEADER: &str = "step,time_s,contacts,iterations,quad,residual,converged,max_penetration_m,kinetic_energy_J,t_detection_s,t_nlgs_s,t_other_s";
 
+/// Header of `quality.csv`: a row for every step that missed the solver's tolerance or
+/// overlapped by more than a run's report threshold, so that each is named (the body ids of
+/// the deepest overlap, empty when nothing overlaps).
+pub const QUALITY_HEADER: &str =
+    "step,time_s,contacts,iterations,quad,residual,converged,max_penetration_m,body1,body2";
+
+/// One `quality.csv` row.
+pub fn quality_row(r: &StepReport) -> String {
+    let bodies = if r.max_penetration > 0.0 {
+        format!("{},{}", r.deepest[0], r.deepest[1])
+    } else {
+        ",".to_string()
+    };
+    format!(
+        "{},{:.9e},{},{},{:.6e},{:.6e},{},{:.6e},{bodies}",
+        r.step,
+        r.time,
+        r.contacts,
+        r.solve.iterations,
+        r.solve.quad,
+        r.solve.residual,
+        u8::from(r.solve.converged),
+        r.max_penetration,
+    )
+}
+
 /// One `series.csv` row.
 pub fn series_row(r: &StepReport, kinetic_energy: f64) -> String {
     format!(
