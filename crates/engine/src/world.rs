@@ -60,7 +60,9 @@ pub struct StepSettings {
     /// contact points churn. Only with [`Self::contact_stiffness`].
     #[serde(default = "default_overlap_recovery")]
     pub overlap_recovery: f64,
-    /// Excess overlap over `F/k` the recovery tolerates (m).
+    /// Excess overlap over `F/k` the recovery tolerates (m). With the recovery on, the
+    /// position correction too treats only the excess over `F/k` as an overlap (see
+    /// [`crate::solver::correction::overlaps`]): the law owns the elastic deflection.
     #[serde(default = "default_overlap_slop")]
     pub overlap_slop: f64,
     /// NLGS settings.
@@ -105,9 +107,9 @@ impl Default for StepSettings {
 }
 
 /// Default [`StepSettings::overlap_recovery`]: off, the rate form alone. It pays where
-/// driven tools wedge grains (the track model's default is 0.2); in a pile settling from a
-/// pour, whose overlaps come from impacts that the position correction heals, it left 1.4
-/// times as many steps unconverged over seven grain packs (BENCHMARKS.md, the overlap recovery).
+/// driven tools wedge grains (the track model's default is 0.2); in piles settling from a
+/// pour the measurements disagree between step sizes (BENCHMARKS.md, the overlap recovery and
+/// the correction on the excess).
 pub fn default_overlap_recovery() -> f64 {
     0.0
 }
@@ -566,6 +568,13 @@ impl World {
         let nlgs = self.nlgs();
         let s = &self.settings;
         let (h, theta) = (s.dt, s.theta);
+        // With the overlap recovery the law owns the elastic deflection; without it, the
+        // correction heals whole overlaps as before.
+        let elastic = if nlgs.recovery > 0.0 {
+            nlgs.overlap_per_impulse
+        } else {
+            0.0
+        };
 
         // 3. NLGS, monolithic or domain-decomposed, then the overlap correction (on the
         // same split).
@@ -580,6 +589,7 @@ impl World {
                 let corrected = pseudo_velocities(
                     &s.correction,
                     h,
+                    elastic,
                     &self.scratch.locals,
                     &self.scratch.solver_bodies,
                     &mut self.scratch.pseudo,
@@ -600,6 +610,7 @@ impl World {
                     Some(ddm::CorrectionPass {
                         settings: &s.correction,
                         h,
+                        elastic_per_impulse: elastic,
                         pseudo: &mut self.scratch.pseudo,
                     }),
                 );

@@ -46,13 +46,9 @@ fn cube_on_floor(stiffness: Option<f64>, theta: f64) -> (World, f64) {
     (World::new(bodies, FrictionTable::new(0.8), settings), m)
 }
 
-/// Under its weight the cube sinks until its four corners carry `m g / 4` each: by
-/// `m g / (4 k)` (6.6 µm for k = 1e6 N/m). θ = 0.6 damps the contact's oscillation
-/// (`ω h = 0.63`: a factor 0.96 a step), so 3,000 steps leave it at rest.
-#[test]
-fn a_resting_block_sinks_by_its_weight_over_the_stiffness() {
-    let k = 1e6;
-    let (mut w, m) = cube_on_floor(Some(k), 0.6);
+/// Steps the cube of [`cube_on_floor`] (mass `m`, contacts of `k` N/m) 3,000 times, each
+/// converged, and checks that it sank by its deflection `m g / (4 k)`.
+fn settles_at_its_deflection(w: &mut World, m: f64, k: f64) {
     for _ in 0..3000 {
         let r = w.step();
         assert!(r.solve.converged, "{:?}", r.solve);
@@ -63,6 +59,16 @@ fn a_resting_block_sinks_by_its_weight_over_the_stiffness() {
         (sink - expected).abs() <= 1e-3 * expected,
         "sank {sink:e} m, expected {expected:e} m"
     );
+}
+
+/// Under its weight the cube sinks until its four corners carry `m g / 4` each: by
+/// `m g / (4 k)` (6.6 µm for k = 1e6 N/m). θ = 0.6 damps the contact's oscillation
+/// (`ω h = 0.63`: a factor 0.96 a step), so 3,000 steps leave it at rest.
+#[test]
+fn a_resting_block_sinks_by_its_weight_over_the_stiffness() {
+    let k = 1e6;
+    let (mut w, m) = cube_on_floor(Some(k), 0.6);
+    settles_at_its_deflection(&mut w, m, k);
     // Each corner carries a quarter of the weight, and its overlap is its deflection.
     let c = &w.contacts;
     assert_eq!(c.len(), 4);
@@ -73,6 +79,23 @@ fn a_resting_block_sinks_by_its_weight_over_the_stiffness() {
             "corner force {f} N"
         );
     }
+    assert!(w.bodies.velocity[1].length() < 1e-9);
+}
+
+/// With the overlap recovery on, the position correction heals overlaps beyond the elastic
+/// deflection the contact's force implies, not the deflection itself: with the correction on
+/// (β = 0.2, slop 10 µm), a cube on springs of 1e5 N/m still sinks by `m g / (4 k)` = 66 µm
+/// (the recovery's slop, 0.25 mm, keeps the recovery itself out of it). Counting the whole
+/// overlap, as without the recovery, the correction moved it while the rate form kept its
+/// forces, and it came to rest 83 µm deep.
+#[test]
+fn the_correction_leaves_a_resting_block_its_deflection() {
+    let k = 1e5;
+    let (mut w, m) = cube_on_floor(Some(k), 0.6);
+    w.settings.correction = CorrectionSettings::default();
+    w.settings.overlap_recovery = 0.2;
+    assert!(w.settings.correction.fraction > 0.0);
+    settles_at_its_deflection(&mut w, m, k);
     assert!(w.bodies.velocity[1].length() < 1e-9);
 }
 
@@ -149,7 +172,8 @@ fn stiff_contacts_need_fewer_sweeps_in_a_jammed_pile() {
 
 /// With compliant contacts a run depends on the partition alone: the same digest on 1 and 2
 /// threads under DDM, and a checkpointed run resumes bit-identical (the law's memory is the
-/// impulses the checkpoint keeps).
+/// impulses the checkpoint keeps), with the overlap recovery off and on (then the correction
+/// too reads the impulses: it heals only the excess over `F/k`).
 #[test]
 fn compliant_runs_are_deterministic_and_resume_exactly() {
     let ddm = DdmSettings {
@@ -157,30 +181,47 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
         min_parallel_contacts: 1,
         ..Default::default()
     };
-    let digest = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            let mut w = pile(Some(1e7), Some(ddm.clone()));
-            run(&mut w, 300);
-            state_digest(&w.bodies)
-        })
+    let pile_with = |beta: f64, ddm: Option<DdmSettings>| {
+        let mut w = pile(Some(1e7), ddm);
+        w.settings.overlap_recovery = beta;
+        w
     };
-    assert_eq!(digest(1), digest(2));
+    let mut digests = Vec::new();
+    for beta in [0.0, 0.2] {
+        let digest = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let mut w = pile_with(beta, Some(ddm.clone()));
+                run(&mut w, 300);
+                state_digest(&w.bodies)
+            })
+        };
+        assert_eq!(digest(1), digest(2), "β {beta}");
+        digests.push(digest(1));
 
-    let mut whole = pile(Some(1e7), None);
-    run(&mut whole, 400);
-    let mut first = pile(Some(1e7), None);
-    run(&mut first, 250);
-    let path = std::env::temp_dir().join(format!("ballast-compliance-{}.bin", std::process::id()));
-    write_checkpoint(&first, &path).unwrap();
-    let mut resumed = pile(Some(1e7), None);
-    read_checkpoint(&path, &mut resumed).unwrap();
-    std::fs::remove_file(&path).ok();
-    run(&mut resumed, 150);
-    assert_eq!(state_digest(&whole.bodies), state_digest(&resumed.bodies));
+        let mut whole = pile_with(beta, None);
+        run(&mut whole, 400);
+        let mut first = pile_with(beta, None);
+        run(&mut first, 250);
+        let path = std::env::temp_dir().join(format!(
+            "ballast-compliance-{}-{beta}.bin",
+            std::process::id()
+        ));
+        write_checkpoint(&first, &path).unwrap();
+        let mut resumed = pile_with(beta, None);
+        read_checkpoint(&path, &mut resumed).unwrap();
+        std::fs::remove_file(&path).ok();
+        run(&mut resumed, 150);
+        assert_eq!(
+            state_digest(&whole.bodies),
+            state_digest(&resumed.bodies),
+            "β {beta}"
+        );
+    }
+    assert_ne!(digests[0], digests[1], "the recovery should change the run");
 }
 
 /// `[simulation] contact_stiffness`: `inf` is rigid (the same digest as no key), a value that

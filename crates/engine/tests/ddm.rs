@@ -113,11 +113,12 @@ fn ddm_with_single_sweeps_equals_monolithic_in_partition_order() {
             Some(ddm::CorrectionPass {
                 settings: &correction,
                 h,
+                elastic_per_impulse: 0.0,
                 pseudo: &mut p_ddm,
             }),
         );
         let mut rows = Vec::new();
-        let overlapping = correction::overlaps(&correction, h, &l2, &mut rows);
+        let overlapping = correction::overlaps(&correction, h, 0.0, &l2, &mut rows);
         assert!(
             corrected && overlapping > 10,
             "{dims:?}: {overlapping} overlaps"
@@ -126,6 +127,7 @@ fn ddm_with_single_sweeps_equals_monolithic_in_partition_order() {
         assert!(correction::pseudo_velocities(
             &correction,
             h,
+            0.0,
             &l2,
             &v2,
             &mut p_mono

@@ -42,16 +42,17 @@ fn the_small_track_cycle_converges_on_nearly_every_step() {
          overlap {:.2} mm, compacity under the block {before:.3} → {after:.3}",
         deepest * 1e3
     );
-    // Measured: 196 of 4,700 (4.2 %; 84 % at dt = 4e-4 s with rigid contacts), largest
-    // residual 0.157, largest overlap 3.31 mm, compacity 0.398 → 0.440 (without the overlap
-    // recovery: 243, 0.030, 2.98 mm, 0.460). Granular flow is chaotic, and a change that only
-    // reorders rounding moves such figures by tens of percent, so the bounds are set over the
-    // bed's five grain packs (`[ballast] seed` 3–7, BENCHMARKS.md): 166–582 steps
-    // unconverged (3.5–12.4 %), residuals 0.043–0.195, overlaps 1.25–7.46 mm. The unconverged
-    // bound holds this pack with a 40 % margin, the residual bound the worst pack's plus 25 %,
-    // and the overlap bound this pack's plus 20 % (seed 5's wedged grain reaches 7.46 mm).
+    // Measured: 214 of 4,700 (4.6 %; 84 % at dt = 4e-4 s with rigid contacts), largest
+    // residual 0.034, largest overlap 1.48 mm, compacity 0.398 → 0.446 (with the correction
+    // counting whole overlaps: 196, 0.157, 3.31 mm, 0.440). Granular flow is chaotic, and a
+    // change that only reorders rounding moves such figures by tens of percent, so the bounds
+    // are set over the bed's five grain packs (`[ballast] seed` 3–7, BENCHMARKS.md): 214–561
+    // steps unconverged (4.6–11.9 %), residuals 0.029–1.006 (seed 6: one step as a grain
+    // wedged at 20 kN between the block's end and a wall lets go), overlaps 1.21–2.79 mm. The
+    // unconverged bound holds this pack with a 30 % margin, the residual bound this pack's
+    // residual seven times over, and the overlap bound this pack's plus 35 %.
     assert!(unconverged * 100 <= 6 * steps, "{unconverged} of {steps}");
     assert!(worst <= 0.25, "largest residual {worst}");
-    assert!(deepest <= 4e-3, "largest overlap {deepest} m");
+    assert!(deepest <= 2e-3, "largest overlap {deepest} m");
     assert!(after >= 1.1 * before, "compacity {before} → {after}");
 }

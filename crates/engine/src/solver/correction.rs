@@ -11,6 +11,11 @@
 //! `b_α = −max(g_α, 0) / h`: pushing one overlap apart may close their gap, not overlap them.
 //! Without `rotation`, the pseudo-impulses move the bodies' centres only (`Ṽ = M⁻¹ Hₙ p` with
 //! the inertia terms left out, and `W_α,nn = m₁⁻¹ + m₂⁻¹`).
+//! With the compliant law's overlap recovery on, a compliant contact (stiffness `k`) is meant
+//! to overlap by its elastic deflection `r̄ₙ/(k h)`, with `r̄ₙ` the normal impulse of the step
+//! before (the force that goes with the step's initial gap; the rate form keeps
+//! `δ − r̄ₙ/(k h)` constant): only the excess over it counts as an overlap, `g_α` above is
+//! then `g_α + r̄ₙ/(k h)`, and the correction leaves a loaded spring its deflection.
 //! β = 0 switches it off (plain Moreau-Jean, as LMGC90).
 
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
@@ -110,10 +115,12 @@ pub(crate) fn at_rest(b: &SolverBody, rotation: bool) -> SolverBody {
 
 /// Lists in `out` the contacts of `locals` overlapping beyond the slop (with `guard`, every
 /// contact), in order, with `p = 0`; returns how many overlap. None when the correction is
-/// off.
+/// off. `elastic_per_impulse` is `1/(k h)` for compliant contacts (the deflection the normal
+/// impulse of the step before implies is not an overlap), 0 for rigid ones.
 pub fn overlaps(
     settings: &CorrectionSettings,
     h: f64,
+    elastic_per_impulse: f64,
     locals: &[LocalProblem],
     out: &mut Vec<Overlap>,
 ) -> usize {
@@ -123,9 +130,11 @@ pub fn overlaps(
     }
     let mut overlapping = 0;
     out.extend(locals.iter().enumerate().filter_map(|(k, c)| {
-        let target = if c.gap < -settings.slop {
+        // Exact for rigid contacts: adding 0 leaves the gap's bits.
+        let gap = c.gap + elastic_per_impulse * c.r_prev.max(0.0);
+        let target = if gap < -settings.slop {
             overlapping += 1;
-            (settings.fraction * (-c.gap - settings.slop)).min(settings.max_push) / h
+            (settings.fraction * (-gap - settings.slop)).min(settings.max_push) / h
         } else if settings.guard {
             -c.gap.max(0.0) / h
         } else {
@@ -168,10 +177,12 @@ pub(crate) fn sweep<B: BodyAccess + ?Sized>(
 
 /// Computes the pseudo-velocities in `pseudo` (one per body, zero-initialised here; inverse
 /// masses copied from `bodies`) for the overlapping contacts among `locals`, by
-/// `settings.sweeps` sweeps in contact order. Returns whether any contact overlapped.
+/// `settings.sweeps` sweeps in contact order (`elastic_per_impulse` as in [`overlaps`]).
+/// Returns whether any contact overlapped.
 pub fn pseudo_velocities(
     settings: &CorrectionSettings,
     h: f64,
+    elastic_per_impulse: f64,
     locals: &[LocalProblem],
     bodies: &[SolverBody],
     pseudo: &mut Vec<SolverBody>,
@@ -179,7 +190,7 @@ pub fn pseudo_velocities(
     pseudo.clear();
     pseudo.extend(bodies.iter().map(|b| at_rest(b, settings.rotation)));
     let mut rows = Vec::new();
-    if overlaps(settings, h, locals, &mut rows) == 0 {
+    if overlaps(settings, h, elastic_per_impulse, locals, &mut rows) == 0 {
         return false;
     }
     for _ in 0..settings.sweeps {
@@ -217,6 +228,7 @@ mod tests {
         assert!(pseudo_velocities(
             settings,
             h,
+            0.0,
             &locals,
             &bodies,
             &mut pseudo
@@ -278,7 +290,14 @@ mod tests {
                 ..Default::default()
             };
             let mut pseudo = Vec::new();
-            assert!(pseudo_velocities(&s, h, &locals[..1], &bodies, &mut pseudo));
+            assert!(pseudo_velocities(
+                &s,
+                h,
+                0.0,
+                &locals[..1],
+                &bodies,
+                &mut pseudo
+            ));
             let healed = locals[0].gap + h * locals[0].velocity(pseudo.as_slice()).x;
             assert!(healed.abs() < 1e-12, "{rotation}: {healed}");
             let spin = pseudo[1].w.length();
@@ -290,6 +309,40 @@ mod tests {
                 assert!((pseudo[1].v - DVec3::X * 5.0).length() < 1e-9);
             }
         }
+    }
+
+    #[test]
+    fn a_compliant_contact_keeps_the_deflection_its_impulse_implies() {
+        // k = 1e7 N/m, h = 1e-3 s: an impulse of 2 N s (a 2 kN force) deflects the spring by
+        // 0.2 mm. A contact 0.2 mm deep carrying it is not an overlap; 1.2 mm deep, its
+        // excess of 1 mm is.
+        let (k, h) = (1e7, 1e-3);
+        let (mut locals, bodies) = row();
+        locals[0].r_prev = 2.0;
+        let s = CorrectionSettings {
+            fraction: 1.0,
+            slop: 0.0,
+            sweeps: 50,
+            ..Default::default()
+        };
+        let mut rows = Vec::new();
+        let e = 1.0 / (k * h);
+        locals[0].gap = -2e-4;
+        assert_eq!(overlaps(&s, h, e, &locals, &mut rows), 0);
+        // The same depth in a rigid contact is an overlap.
+        assert_eq!(overlaps(&s, h, 0.0, &locals, &mut rows), 1);
+        locals[0].gap = -1.2e-3;
+        let mut pseudo = Vec::new();
+        assert!(pseudo_velocities(
+            &s,
+            h,
+            e,
+            &locals[..1],
+            &bodies,
+            &mut pseudo
+        ));
+        let after = locals[0].gap + h * locals[0].velocity(pseudo.as_slice()).x;
+        assert!((after + 2e-4).abs() < 1e-12, "{after}");
     }
 
     #[test]

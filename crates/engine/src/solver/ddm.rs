@@ -542,6 +542,8 @@ pub struct CorrectionPass<'a> {
     pub settings: &'a CorrectionSettings,
     /// Time step (s).
     pub h: f64,
+    /// `1/(k h)` of compliant contacts, 0 for rigid ones (see [`correction::overlaps`]).
+    pub elastic_per_impulse: f64,
     /// The pseudo-velocities, one per body in the caller's numbering (output).
     pub pseudo: &'a mut Vec<SolverBody>,
 }
@@ -731,17 +733,17 @@ fn correct(
 ) -> bool {
     let starts = &partition.starts;
     pv.clear();
-    let (settings, h) = (c.settings, c.h);
+    let (settings, h, e) = (c.settings, c.h, c.elastic_per_impulse);
     pv.par_extend(
         pb.par_iter()
             .map(|b| correction::at_rest(b, settings.rotation)),
     );
     let found = for_subdomains(p, pv, starts, min_parallel, |b, _| {
-        correction::overlaps(settings, h, &b.locals, &mut b.overlaps)
+        correction::overlaps(settings, h, e, &b.locals, &mut b.overlaps)
     })
     .into_iter()
     .chain(for_interface(p, pv, starts, min_parallel, |b, _| {
-        correction::overlaps(settings, h, &b.locals, &mut b.overlaps)
+        correction::overlaps(settings, h, e, &b.locals, &mut b.overlaps)
     }))
     .any(|n| n > 0);
     if found {
