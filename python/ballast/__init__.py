@@ -249,14 +249,15 @@ class Simulation:
         installed, else ``None``), its parts ``indptr``, ``indices``, ``blocks``, ``q``
         ``(n, 3)``, ``mu`` ``(n,)``, ``scale`` (the norm the residual is relative to) and
         ``compliance`` (``c = 1/(k h²)`` of compliant contacts, already in ``W`` and ``q``; 0
-        for rigid ones).
+        for rigid ones) and ``tangential_compliance`` (``1/(k_t h²)`` with a tangential
+        stiffness, on the tangential diagonal of ``W``; 0 without).
 
         Its global form (FCLIB's ``fclib_global``, Siconos' ``GlobalFrictionContactProblem``)
         over the ``bodies`` the contacts move (world indices, 6 velocities each: linear then
         angular): ``v = v_free + M_inv H r``, ``u = H.T v + b``, so ``W = H.T M_inv H`` (plus
-        ``compliance`` on the normal rows) and ``q = H.T v_free + b`` (``b``: the driven and
-        fixed bodies' motion, the gap shift and ``-compliance`` times the previous step's normal
-        impulses).
+        ``compliance`` on the normal rows, ``tangential_compliance`` on the tangential ones)
+        and ``q = H.T v_free + b`` (``b``: the driven and fixed bodies' motion, the gap shift
+        and minus the compliances times the previous step's impulses).
         ``H`` ``(6 nb, 3 n)``, ``M`` (masses, world inertia tensors) and ``M_inv`` (the
         solver's: zero on a degree of freedom a drive imposes) are scipy sparse matrices,
         ``v_free`` ``(6 nb,)``; their parts ``H_blocks``, ``H_body``, ``H_contact``, ``mass``,

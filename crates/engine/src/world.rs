@@ -52,6 +52,14 @@ pub struct StepSettings {
     /// elastic grains instead of any of the rigid law's unbounded set of self-stresses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
+    /// Tangential stiffness of a contact point (N/m), with [`Self::contact_stiffness`] only;
+    /// `None`: sticking contacts are rigid tangentially (Coulomb's law as such). The same
+    /// rate form as the normal law: over a step a sticking contact's tangential force changes
+    /// by `k_t` times its tangential displacement `h u_t`, from the force it carried, within
+    /// the friction cone (the Cundall-Strack spring in NSCD form). A wedged grain at `μ = 1`
+    /// then carries the elastic share of its load, not any of the rigid law's self-stresses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tangential_stiffness: Option<f64>,
     /// Overlap recovery of the compliant law, β ∈ [0, 1]: the fraction of a contact's overlap
     /// in excess of its elastic deflection `F/k` (beyond [`Self::overlap_slop`]) that the law
     /// asks the contact to remove within a step (a separation speed `β excess / h` added to
@@ -87,6 +95,29 @@ pub fn check_contact_stiffness(k: Option<f64>) -> Result<Option<f64>, String> {
     }
 }
 
+/// Checks a scenario's `simulation.tangential_stiffness` (N/m): absent, or `> 0` with a
+/// finite `simulation.contact_stiffness` (`normal`, as [`check_contact_stiffness`] returns
+/// it); `inf` means rigid tangentially (`None`).
+pub fn check_tangential_stiffness(
+    k: Option<f64>,
+    normal: Option<f64>,
+) -> Result<Option<f64>, String> {
+    match k {
+        None => Ok(None),
+        Some(k) if k == f64::INFINITY => Ok(None),
+        Some(k) if k > 0.0 && k.is_finite() => match normal {
+            Some(_) => Ok(Some(k)),
+            None => Err(format!(
+                "simulation.tangential_stiffness = {k} needs compliant contacts: set \
+                 simulation.contact_stiffness (> 0 N/m) too"
+            )),
+        },
+        Some(k) => Err(format!(
+            "simulation.tangential_stiffness = {k} must be > 0 N/m (inf: rigid sticking)"
+        )),
+    }
+}
+
 impl Default for StepSettings {
     fn default() -> Self {
         Self {
@@ -97,6 +128,7 @@ impl Default for StepSettings {
             match_fraction: 0.1,
             reuse_distance: default_reuse_distance(),
             contact_stiffness: None,
+            tangential_stiffness: None,
             overlap_recovery: default_overlap_recovery(),
             overlap_slop: default_overlap_slop(),
             solver: SolverSettings::default(),
@@ -354,6 +386,13 @@ impl World {
                 .settings
                 .contact_stiffness
                 .map_or(0.0, |_| self.settings.overlap_recovery),
+            tangential_compliance: match (
+                self.settings.contact_stiffness,
+                self.settings.tangential_stiffness,
+            ) {
+                (Some(_), Some(kt)) => 1.0 / (kt * h * h),
+                _ => 0.0,
+            },
             inv_h: 1.0 / h,
             overlap_per_impulse: self
                 .settings

@@ -598,6 +598,7 @@ fn problem_dict<'py>(py: Python<'py>, p: &ContactProblem) -> PyResult<Bound<'py,
     d.set_item("mu", p.mu.clone().into_pyarray(py))?;
     d.set_item("scale", p.scale)?;
     d.set_item("compliance", p.compliance)?;
+    d.set_item("tangential_compliance", p.tangential_compliance)?;
     Ok(d)
 }
 
@@ -681,6 +682,7 @@ fn solve_fc3d_blocks<'py>(
         mu,
         scale,
         compliance: 0.0,
+        tangential_compliance: 0.0,
     };
     let mut r = match &r0 {
         Some(a) => vec3s(a, "r0")?,

@@ -7,6 +7,7 @@
 //! alert = 4e-4          # m
 //! reuse_distance = 1e-5 # m, contact geometry reused until a grain moved this far (0 = never)
 //! contact_stiffness = 1e7 # N/m per contact point (default: rigid contacts)
+//! tangential_stiffness = 1e7 # N/m, sticking contacts' spring (default: rigid sticking)
 //! overlap_recovery = 0.2  # compliant contacts: fraction of the overlap beyond F/k removed per step (engine default: 0)
 //! overlap_slop = 2.5e-4   # m, excess overlap the recovery tolerates
 //! output_interval = 25  # steps between rows of series.csv
@@ -66,6 +67,10 @@ pub struct TrackSimulation {
     /// contacts (see `ballast_engine::world::StepSettings::contact_stiffness`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
+    /// Tangential stiffness of a contact point (N/m), with `contact_stiffness` only; `None` or
+    /// `inf`: rigid sticking (see `ballast_engine::world::StepSettings::tangential_stiffness`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tangential_stiffness: Option<f64>,
     /// Overlap recovery β ∈ [0, 1] of the compliant law (see
     /// `ballast_engine::world::StepSettings::overlap_recovery`).
     pub overlap_recovery: f64,
@@ -95,6 +100,7 @@ impl Default for TrackSimulation {
             alert: DEFAULT_ALERT,
             reuse_distance: ballast_engine::world::default_reuse_distance(),
             contact_stiffness: None,
+            tangential_stiffness: None,
             // Tines wedge grains against the block: there the rate form's overlaps drift by
             // millimetres without it (BENCHMARKS.md, the overlap recovery).
             overlap_recovery: 0.2,
@@ -459,6 +465,12 @@ impl TrackScenario {
             )
             .into());
         }
+        if let Err(e) = ballast_engine::world::check_tangential_stiffness(
+            s.tangential_stiffness,
+            ballast_engine::world::check_contact_stiffness(s.contact_stiffness).unwrap_or(None),
+        ) {
+            return Err(ballast_engine::ScenarioError(e).into());
+        }
         check_range(
             "simulation.overlap_recovery",
             s.overlap_recovery,
@@ -557,6 +569,11 @@ impl TrackScenario {
             alert: self.simulation.alert,
             reuse_distance: self.simulation.reuse_distance,
             contact_stiffness: stiffness,
+            tangential_stiffness: ballast_engine::world::check_tangential_stiffness(
+                self.simulation.tangential_stiffness,
+                stiffness,
+            )
+            .unwrap_or(None),
             // Inert for rigid contacts: kept at the engine's default there, so that a rigid
             // run's checkpoints do not depend on it.
             overlap_recovery: if stiffness.is_some() {

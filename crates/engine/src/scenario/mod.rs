@@ -10,6 +10,7 @@
 //! alert = 1e-3         # m
 //! reuse_distance = 1e-5 # m: contact geometry reused until a grain moved this far (0 = never)
 //! contact_stiffness = 1e7 # N/m per contact point (absent or inf = rigid contacts)
+//! tangential_stiffness = 1e7 # N/m, sticking contacts' spring (absent = rigid sticking)
 //! overlap_recovery = 0   # compliant law: fraction of the overlap beyond F/k removed per step
 //! overlap_slop = 2.5e-4  # m: excess overlap the recovery tolerates
 //! output_interval = 50 # steps between rows of series.csv
@@ -110,6 +111,10 @@ pub struct Simulation {
     /// `StepSettings::contact_stiffness`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub contact_stiffness: Option<f64>,
+    /// Tangential stiffness of a contact point (N/m), with `contact_stiffness` only; absent or
+    /// `inf`: rigid sticking (see `StepSettings::tangential_stiffness`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tangential_stiffness: Option<f64>,
     /// Overlap recovery β ∈ [0, 1] of the compliant law (see `StepSettings::overlap_recovery`).
     #[serde(default = "crate::world::default_overlap_recovery")]
     pub overlap_recovery: f64,
@@ -547,7 +552,10 @@ impl Scenario {
                 0.25 * s.alert
             ));
         }
-        crate::world::check_contact_stiffness(s.contact_stiffness).map_err(ScenarioError)?;
+        let normal =
+            crate::world::check_contact_stiffness(s.contact_stiffness).map_err(ScenarioError)?;
+        crate::world::check_tangential_stiffness(s.tangential_stiffness, normal)
+            .map_err(ScenarioError)?;
         crate::world::check_overlap_recovery(s.overlap_recovery, s.overlap_slop)
             .map_err(ScenarioError)?;
         if s.output_interval == 0 {
@@ -876,6 +884,11 @@ impl Scenario {
             reuse_distance: s.reuse_distance,
             contact_stiffness: crate::world::check_contact_stiffness(s.contact_stiffness)
                 .unwrap_or(None),
+            tangential_stiffness: crate::world::check_tangential_stiffness(
+                s.tangential_stiffness,
+                s.contact_stiffness,
+            )
+            .unwrap_or(None),
             overlap_recovery: s.overlap_recovery,
             overlap_slop: s.overlap_slop,
             solver: self.solver.clone(),

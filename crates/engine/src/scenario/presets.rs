@@ -40,6 +40,7 @@ pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenari
             alert: 1e-3,
             reuse_distance: crate::world::default_reuse_distance(),
             contact_stiffness: None,
+            tangential_stiffness: None,
             overlap_recovery: crate::world::default_overlap_recovery(),
             overlap_slop: crate::world::default_overlap_slop(),
             output_interval: 50,

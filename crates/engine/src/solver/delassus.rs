@@ -45,6 +45,10 @@ pub struct LocalProblem {
     /// Normal impulse the contact carried at the end of the previous step (0 for a new
     /// contact): the memory of the compliant normal law (see [`super::Nlgs`]).
     pub r_prev: f64,
+    /// Tangential impulse `(r_t, r_s)` at the end of the previous step, re-projected on this
+    /// step's frame: the memory of the tangential spring (single precision: it only shifts
+    /// a sticking contact's rest point, and keeps the local problem at 216 bytes).
+    pub rt_prev: [f32; 2],
 }
 
 /// Access to the solver bodies a sweep works on: the whole array (monolithic NLGS), or the
@@ -182,6 +186,7 @@ pub(crate) fn build_local_problems(
                     DVec3::ZERO
                 },
                 r_prev: contacts.impulse[k].x,
+                rt_prev: [contacts.impulse[k].y as f32, contacts.impulse[k].z as f32],
             }
         })
         .collect_into_vec(out);
@@ -213,6 +218,7 @@ pub(crate) fn contact_along_x(
         mu,
         r: DVec3::ZERO,
         r_prev: 0.0,
+        rt_prev: [0.0; 2],
     }
 }
 
@@ -222,9 +228,9 @@ mod tests {
 
     /// The sweep streams the local problems from memory at large scale: their size is a
     /// budget (320 bytes with `W` and `W⁻¹` as full matrices and the frame's three vectors;
-    /// 8 of the 208 are the compliant law's memory).
+    /// 16 of the 216 are the compliant law's memory).
     #[test]
     fn local_problem_size() {
-        assert_eq!(std::mem::size_of::<LocalProblem>(), 208);
+        assert_eq!(std::mem::size_of::<LocalProblem>(), 216);
     }
 }

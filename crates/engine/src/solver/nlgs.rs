@@ -74,6 +74,8 @@ pub struct Nlgs {
     pub h_theta: f64,
     /// Normal compliance `c = 1/(k h²)` of the compliant law (0: rigid contacts).
     pub compliance: f64,
+    /// Tangential compliance `c_t = 1/(k_t h²)` (0: sticking contacts are rigid).
+    pub tangential_compliance: f64,
     /// β of the compliant law's overlap recovery (0: off; always 0 for rigid contacts).
     pub recovery: f64,
     /// `1/h`.
@@ -124,7 +126,12 @@ impl Nlgs {
         let unloaded = c.r == DVec3::ZERO;
         let uf = if unloaded { u } else { u - c.w * c.r };
         // The compliant law's free velocity (exactly `uf` for rigid contacts).
-        let uf = DVec3::new(uf.x - self.compliance * c.r_prev, uf.y, uf.z);
+        let ct = self.tangential_compliance;
+        let uf = DVec3::new(
+            uf.x - self.compliance * c.r_prev,
+            uf.y - ct * f64::from(c.rt_prev[0]),
+            uf.z - ct * f64::from(c.rt_prev[1]),
+        );
         let (rhat, status) = if c.gap + self.h_theta * uf.x > 0.0 {
             // An open contact that stays open (about 40 % of the updates in a dense bed):
             // nothing to apply, nothing to add to the sums.
@@ -137,6 +144,8 @@ impl Nlgs {
             // inverse costs less than streaming 72 more bytes per contact.
             let mut w = c.w.to_mat();
             w.x_axis.x += self.compliance;
+            w.y_axis.y += ct;
+            w.z_axis.z += ct;
             solve_local_from(&w, &w.inverse(), self.shifted(c, uf), c.mu, c.r)
         };
         let om = self.settings.relaxation;
@@ -215,6 +224,9 @@ impl Nlgs {
     pub(crate) fn residual2<B: BodyAccess + ?Sized>(&self, c: &LocalProblem, v: &B) -> f64 {
         let mut u = c.velocity(v);
         u.x += self.compliance * (c.r.x - c.r_prev);
+        let ct = self.tangential_compliance;
+        u.y += ct * (c.r.y - f64::from(c.rt_prev[0]));
+        u.z += ct * (c.r.z - f64::from(c.rt_prev[1]));
         // ρ = 1/W_nn makes `r − ρ u` consistent in units (N·s); dividing by ρ gives m/s.
         let rho = 1.0 / (c.w.xx() + self.compliance);
         (natural_map_residual(c.r, self.shifted(c, u) * rho, c.mu) / rho).powi(2)
@@ -396,6 +408,7 @@ mod tests {
             settings: SolverSettings::default(),
             h_theta: 5e-4,
             compliance: 0.0,
+            tangential_compliance: 0.0,
             recovery: 0.0,
             inv_h: 1.0 / 5e-4,
             overlap_per_impulse: 0.0,

@@ -97,6 +97,9 @@ pub struct ContactProblem {
     pub scale: f64,
     /// The normal compliance `c = 1/(k h²)` included in `W` and `q` (0: rigid contacts).
     pub compliance: f64,
+    /// The tangential compliance `c_t = 1/(k_t h²)` included in `W` and `q` (0: rigid
+    /// sticking).
+    pub tangential_compliance: f64,
 }
 
 /// Lever arm, sign and body of one side of a contact, for the assembly.
@@ -113,7 +116,7 @@ impl ContactProblem {
     /// factor `h θ`, its normal compliance (0: rigid) and its overlap recovery. Deterministic:
     /// blocks are summed in body order.
     pub(crate) fn assemble(locals: &[LocalProblem], v_free: &[SolverBody], nlgs: &Nlgs) -> Self {
-        let compliance = nlgs.compliance;
+        let (compliance, ct) = (nlgs.compliance, nlgs.tangential_compliance);
         let n = locals.len();
         // The contacts each writable body carries, in contact order.
         let mut sides: Vec<Vec<Side>> = vec![Vec::new(); v_free.len()];
@@ -185,13 +188,20 @@ impl ContactProblem {
         let q = locals
             .iter()
             .zip(free)
-            .map(|(c, u)| nlgs.shifted(c, DVec3::new(u.x - compliance * c.r_prev, u.y, u.z)))
+            .map(|(c, u)| {
+                let [t, s] = c.rt_prev.map(f64::from);
+                let u = DVec3::new(u.x - compliance * c.r_prev, u.y - ct * t, u.z - ct * s);
+                nlgs.shifted(c, u)
+            })
             .collect();
         if compliance > 0.0 {
             for a in 0..n {
                 let range = w.row_start[a]..w.row_start[a + 1];
                 if let Ok(k) = w.cols[range.clone()].binary_search(&(a as u32)) {
-                    w.blocks[range.start + k].x_axis.x += compliance;
+                    let b = &mut w.blocks[range.start + k];
+                    b.x_axis.x += compliance;
+                    b.y_axis.y += ct;
+                    b.z_axis.z += ct;
                 }
             }
         }
@@ -201,6 +211,7 @@ impl ContactProblem {
             mu: locals.iter().map(|c| c.mu).collect(),
             scale,
             compliance,
+            tangential_compliance: ct,
         }
     }
 
@@ -320,7 +331,8 @@ pub struct HBlock {
 /// where `b` gathers what does not depend on those bodies: the motion of driven and fixed
 /// bodies and the gap shift of [`ContactProblem`]. `M⁻¹` is the solver's: zero on a degree of
 /// freedom a drive imposes. With a contact stiffness, `W = Hᵀ M⁻¹ H + c Iₙ` (`c` on the normal
-/// rows, [`GlobalProblem::compliance`]) and `b` holds `−c r̄ₙ`.
+/// rows, [`GlobalProblem::compliance`]; `c_t` on the tangential ones with a tangential
+/// stiffness) and `b` holds `−c r̄ₙ` (and `−c_t r̄_t`).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct GlobalProblem {
     /// The bodies the contacts move (world indices, increasing).
@@ -337,6 +349,8 @@ pub struct GlobalProblem {
     pub b: Vec<DVec3>,
     /// The normal compliance `c` of [`ContactProblem::compliance`].
     pub compliance: f64,
+    /// The tangential compliance of [`ContactProblem::tangential_compliance`].
+    pub tangential_compliance: f64,
 }
 
 impl GlobalProblem {
@@ -404,6 +418,7 @@ impl GlobalProblem {
             h,
             b,
             compliance: problem.compliance,
+            tangential_compliance: problem.tangential_compliance,
         }
     }
 
