@@ -449,13 +449,16 @@ def test_global_form_of_the_contact_problem():
     assert H.shape == (6 * nb, 3 * n) and M.shape == (6 * nb, 6 * nb)
     assert p["v_free"].shape == (6 * nb,)
     # W = Hᵀ M⁻¹ H (the grains are free bodies: M⁻¹ is M's inverse), plus the compliance of
-    # the contacts' normal law on the normal rows (0 for rigid contacts).
+    # the contacts' normal law on the normal rows and that of their tangential spring on the
+    # tangential rows (0 for rigid contacts; the example has both).
     normal = np.zeros(3 * n)
     normal[0::3] = 1.0
-    W2 = (H.T @ M_inv @ H).toarray() + p["compliance"] * np.diag(normal)
+    assert p["compliance"] > 0 and p["tangential_compliance"] > 0
+    W2 = (H.T @ M_inv @ H).toarray() + np.diag(
+        p["compliance"] * normal + p["tangential_compliance"] * (1.0 - normal))
     assert np.abs(W.toarray() - W2).max() <= 1e-12 * np.abs(W2).max()
     assert np.abs((M @ M_inv).toarray() - np.eye(6 * nb)).max() < 1e-9
-    # q = Hᵀ v_free + b, where b is the gap shift alone against the fixed walls.
+    # q = Hᵀ v_free + b, where b is the gap shift and the springs' memory (no driven bodies).
     q = p["q"].reshape(-1)
     assert np.abs(H.T @ p["v_free"] + p["b"].reshape(-1) - q).max() <= 1e-12 * np.abs(q).max()
     # The masses are the bodies' own, and v_free is their velocity plus g h.
