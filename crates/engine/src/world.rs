@@ -140,8 +140,8 @@ impl Default for StepSettings {
 
 /// Default [`StepSettings::overlap_recovery`]: off, the rate form alone. It pays where
 /// driven tools wedge grains (the track model's default is 0.2); in piles settling from a
-/// pour the measurements disagree between step sizes (BENCHMARKS.md, the overlap recovery and
-/// the correction on the excess).
+/// pour it pays with a tangential stiffness, but with rigid sticking the measurements
+/// disagree between step sizes (BENCHMARKS.md, the correction on the excess).
 pub fn default_overlap_recovery() -> f64 {
     0.0
 }

@@ -886,7 +886,7 @@ impl Scenario {
                 .unwrap_or(None),
             tangential_stiffness: crate::world::check_tangential_stiffness(
                 s.tangential_stiffness,
-                s.contact_stiffness,
+                crate::world::check_contact_stiffness(s.contact_stiffness).unwrap_or(None),
             )
             .unwrap_or(None),
             overlap_recovery: s.overlap_recovery,
