@@ -96,12 +96,13 @@ pub fn check_contact_stiffness(k: Option<f64>) -> Result<Option<f64>, String> {
 }
 
 /// Checks a scenario's `simulation.tangential_stiffness` (N/m): absent, or `> 0` with a
-/// finite `simulation.contact_stiffness` (`normal`, as [`check_contact_stiffness`] returns
-/// it); `inf` means rigid tangentially (`None`).
+/// finite `simulation.contact_stiffness` (`normal`, as written); `inf` means rigid
+/// tangentially (`None`).
 pub fn check_tangential_stiffness(
     k: Option<f64>,
     normal: Option<f64>,
 ) -> Result<Option<f64>, String> {
+    let normal = check_contact_stiffness(normal).unwrap_or(None);
     match k {
         None => Ok(None),
         Some(k) if k == f64::INFINITY => Ok(None),

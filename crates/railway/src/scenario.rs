@@ -467,7 +467,7 @@ impl TrackScenario {
         }
         if let Err(e) = ballast_engine::world::check_tangential_stiffness(
             s.tangential_stiffness,
-            ballast_engine::world::check_contact_stiffness(s.contact_stiffness).unwrap_or(None),
+            s.contact_stiffness,
         ) {
             return Err(ballast_engine::ScenarioError(e).into());
         }
@@ -571,7 +571,7 @@ impl TrackScenario {
             contact_stiffness: stiffness,
             tangential_stiffness: ballast_engine::world::check_tangential_stiffness(
                 self.simulation.tangential_stiffness,
-                stiffness,
+                self.simulation.contact_stiffness,
             )
             .unwrap_or(None),
             // Inert for rigid contacts: kept at the engine's default there, so that a rigid

@@ -181,15 +181,10 @@ pub const SERIES_HEADER: &str = "step,time_s,contacts,iterations,quad,residual,c
 pub const QUALITY_HEADER: &str =
     "step,time_s,contacts,iterations,quad,residual,converged,max_penetration_m,body1,body2";
 
-/// One `quality.csv` row.
-pub fn quality_row(r: &StepReport) -> String {
-    let bodies = if r.max_penetration > 0.0 {
-        format!("{},{}", r.deepest[0], r.deepest[1])
-    } else {
-        ",".to_string()
-    };
+/// The columns `series.csv` and `quality.csv` share: step to largest overlap.
+fn step_columns(r: &StepReport) -> String {
     format!(
-        "{},{:.9e},{},{},{:.6e},{:.6e},{},{:.6e},{bodies}",
+        "{},{:.9e},{},{},{:.6e},{:.6e},{},{:.6e}",
         r.step,
         r.time,
         r.contacts,
@@ -201,18 +196,21 @@ pub fn quality_row(r: &StepReport) -> String {
     )
 }
 
+/// One `quality.csv` row.
+pub fn quality_row(r: &StepReport) -> String {
+    let columns = step_columns(r);
+    if r.max_penetration > 0.0 {
+        format!("{columns},{},{}", r.deepest[0], r.deepest[1])
+    } else {
+        format!("{columns},,")
+    }
+}
+
 /// One `series.csv` row.
 pub fn series_row(r: &StepReport, kinetic_energy: f64) -> String {
     format!(
-        "{},{:.9e},{},{},{:.6e},{:.6e},{},{:.6e},{:.9e},{:.6e},{:.6e},{:.6e}",
-        r.step,
-        r.time,
-        r.contacts,
-        r.solve.iterations,
-        r.solve.quad,
-        r.solve.residual,
-        u8::from(r.solve.converged),
-        r.max_penetration,
+        "{},{:.9e},{:.6e},{:.6e},{:.6e}",
+        step_columns(r),
         kinetic_energy,
         r.times.detection,
         r.times.nlgs,

@@ -552,9 +552,8 @@ impl Scenario {
                 0.25 * s.alert
             ));
         }
-        let normal =
-            crate::world::check_contact_stiffness(s.contact_stiffness).map_err(ScenarioError)?;
-        crate::world::check_tangential_stiffness(s.tangential_stiffness, normal)
+        crate::world::check_contact_stiffness(s.contact_stiffness).map_err(ScenarioError)?;
+        crate::world::check_tangential_stiffness(s.tangential_stiffness, s.contact_stiffness)
             .map_err(ScenarioError)?;
         crate::world::check_overlap_recovery(s.overlap_recovery, s.overlap_slop)
             .map_err(ScenarioError)?;
@@ -886,7 +885,7 @@ impl Scenario {
                 .unwrap_or(None),
             tangential_stiffness: crate::world::check_tangential_stiffness(
                 s.tangential_stiffness,
-                crate::world::check_contact_stiffness(s.contact_stiffness).unwrap_or(None),
+                s.contact_stiffness,
             )
             .unwrap_or(None),
             overlap_recovery: s.overlap_recovery,
