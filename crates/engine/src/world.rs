@@ -377,6 +377,8 @@ impl World {
     pub fn nlgs(&self) -> Nlgs {
         let h = self.settings.dt;
         Nlgs {
+            skip_drift: 0.0,
+            skip_now: false,
             settings: self.settings.solver.clone(),
             h_theta: h * self.settings.theta,
             compliance: self
@@ -537,6 +539,8 @@ impl World {
                         0.0
                     },
                     inv_inertia: b.inv_inertia_world(i),
+                    epoch: 0,
+                    drift: 0.0,
                 }
             })
             .collect_into_vec(&mut self.scratch.solver_bodies);
@@ -855,5 +859,7 @@ fn limited_free_body(
         } else {
             DMat3::ZERO
         },
+        epoch: 0,
+        drift: 0.0,
     }
 }

@@ -229,8 +229,9 @@ fn stiff_contacts_need_fewer_sweeps_in_a_jammed_pile() {
 /// With compliant contacts a run depends on the partition alone: the same digest on 1 and 2
 /// threads under DDM, and a checkpointed run resumes bit-identical (the law's memory is the
 /// impulses the checkpoint keeps), with the overlap recovery off and on (then the correction
-/// too reads the impulses: it heals only the excess over `F/k`), and with a tangential
-/// stiffness (whose memory is the tangential impulses).
+/// too reads the impulses: it heals only the excess over `F/k`), with a tangential
+/// stiffness (whose memory is the tangential impulses), and with sweeps that skip contacts
+/// whose bodies did not move (`solver.skip`: the skips depend on the sweep order alone).
 #[test]
 fn compliant_runs_are_deterministic_and_resume_exactly() {
     let ddm = DdmSettings {
@@ -238,14 +239,20 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
         min_parallel_contacts: 1,
         ..Default::default()
     };
-    let pile_with = |(beta, kt): (f64, Option<f64>), ddm: Option<DdmSettings>| {
+    let pile_with = |(beta, kt, skip): (f64, Option<f64>, f64), ddm: Option<DdmSettings>| {
         let mut w = pile(Some(1e7), ddm);
         w.settings.overlap_recovery = beta;
         w.settings.tangential_stiffness = kt;
+        w.settings.solver.skip = skip;
         w
     };
     let mut digests = Vec::new();
-    for beta in [(0.0, None), (0.2, None), (0.2, Some(5e6))] {
+    for beta in [
+        (0.0, None, 0.0),
+        (0.2, None, 0.0),
+        (0.2, Some(5e6), 0.0),
+        (0.2, Some(5e6), 1.0),
+    ] {
         let digest = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
@@ -257,7 +264,7 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
                 state_digest(&w.bodies)
             })
         };
-        assert_eq!(digest(1), digest(2), "β, k_t {beta:?}");
+        assert_eq!(digest(1), digest(2), "β, k_t, skip {beta:?}");
         digests.push(digest(1));
 
         let mut whole = pile_with(beta, None);
@@ -277,7 +284,7 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
         assert_eq!(
             state_digest(&whole.bodies),
             state_digest(&resumed.bodies),
-            "β, k_t {beta:?}"
+            "β, k_t, skip {beta:?}"
         );
     }
     assert_ne!(digests[0], digests[1], "the recovery should change the run");
@@ -285,6 +292,7 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
         digests[1], digests[2],
         "the tangential spring should change the run"
     );
+    assert_ne!(digests[2], digests[3], "skipping should change the iterate");
 }
 
 /// `[simulation] contact_stiffness`: `inf` is rigid (the same digest as no key), a value that

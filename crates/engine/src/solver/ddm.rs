@@ -649,10 +649,14 @@ pub fn solve_and_correct(
     if total_rows == 0 {
         report.converged = true;
     }
+    let drift = super::nlgs::skip_threshold(s, q, total_rows);
+    let mut lazy = nlgs.clone();
     for j in 1..=s.max_iterations {
         if total_rows == 0 {
             break;
         }
+        lazy.for_sweep(j, drift);
+        let nlgs = &lazy;
         let t = Instant::now();
         let sub_sums = for_subdomains(p, pb, starts, min_parallel, |b, v| {
             let mut sums = SweepSums::default();

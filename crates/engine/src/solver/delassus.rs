@@ -19,6 +19,11 @@ pub struct SolverBody {
     pub inv_mass: f64,
     /// World inverse inertia.
     pub inv_inertia: DMat3,
+    /// Counts this body's velocity changes past the skip threshold (see
+    /// [`super::SolverSettings::skip`]; a drive row's change always counts).
+    pub epoch: u32,
+    /// Velocity change (m/s, at the contact points) accumulated since `epoch` last moved.
+    pub drift: f32,
 }
 
 /// One contact's local problem.
@@ -49,6 +54,10 @@ pub struct LocalProblem {
     /// step's frame: the memory of the tangential spring (single precision: it only shifts
     /// a sticking contact's rest point, and keeps the local problem at 216 bytes).
     pub rt_prev: [f32; 2],
+    /// The bodies' epochs (their low 16 bits) when this contact was last solved (see
+    /// [`super::SolverSettings::skip`]; 16 bits fill the struct's padding: an epoch wraps
+    /// only after 65,536 changes of one body within one sweep).
+    pub seen: [u16; 2],
 }
 
 /// Access to the solver bodies a sweep works on: the whole array (monolithic NLGS), or the
@@ -115,6 +124,45 @@ impl LocalProblem {
             b2.v += p * b2.inv_mass;
             b2.w += b2.inv_inertia * self.r2.cross(p);
         }
+    }
+
+    /// [`Self::apply`], adding each body's velocity change at the contact point (an upper
+    /// bound, in the max norm) to its drift and moving its epoch past `eps`.
+    #[inline(always)]
+    pub fn apply_tracked<B: BodyAccess + ?Sized>(&self, b: &mut B, dr: DVec3, eps: f32) {
+        let [n, t, s] = self.frame3();
+        let p = n * dr.x + t * dr.y + s * dr.z;
+        let track = |bd: &mut SolverBody, dv: DVec3, dw: DVec3, arm: DVec3| {
+            bd.drift +=
+                (dv.abs().max_element() + dw.abs().max_element() * arm.abs().max_element()) as f32;
+            if bd.drift > eps {
+                bd.epoch = bd.epoch.wrapping_add(1);
+                bd.drift = 0.0;
+            }
+        };
+        if self.dynamic1 {
+            let b1 = b.body_mut(self.body1);
+            let (dv, dw) = (p * b1.inv_mass, b1.inv_inertia * self.r1.cross(p));
+            b1.v -= dv;
+            b1.w -= dw;
+            track(b1, dv, dw, self.r1);
+        }
+        if self.dynamic2 {
+            let b2 = b.body_mut(self.body2);
+            let (dv, dw) = (p * b2.inv_mass, b2.inv_inertia * self.r2.cross(p));
+            b2.v += dv;
+            b2.w += dw;
+            track(b2, dv, dw, self.r2);
+        }
+    }
+
+    /// The bodies' epochs now (low 16 bits).
+    #[inline(always)]
+    pub fn epochs<B: BodyAccess + ?Sized>(&self, b: &B) -> [u16; 2] {
+        [
+            b.body(self.body1).epoch as u16,
+            b.body(self.body2).epoch as u16,
+        ]
     }
 }
 
@@ -187,6 +235,7 @@ pub(crate) fn build_local_problems(
                 },
                 r_prev: contacts.impulse[k].x,
                 rt_prev: [contacts.impulse[k].y as f32, contacts.impulse[k].z as f32],
+                seen: [u16::MAX; 2],
             }
         })
         .collect_into_vec(out);
@@ -219,6 +268,7 @@ pub(crate) fn contact_along_x(
         r: DVec3::ZERO,
         r_prev: 0.0,
         rt_prev: [0.0; 2],
+        seen: [u16::MAX; 2],
     }
 }
 

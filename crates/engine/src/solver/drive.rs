@@ -62,6 +62,9 @@ impl DriveRows {
                     .clamp(-self.bound_v[d], self.bound_v[d]);
                 let dl = new - lam;
                 b.v[d] += dl * m_inv;
+                if dl != 0.0 {
+                    b.epoch = b.epoch.wrapping_add(1);
+                }
                 self.impulse_v[d] = new;
                 sums.dwr2 += (dl * m_inv).powi(2);
                 sums.wr2 += (new * m_inv).powi(2);
@@ -76,6 +79,9 @@ impl DriveRows {
                     .clamp(-self.bound_w[d], self.bound_w[d]);
                 let dl = new - lam;
                 b.w += col * dl;
+                if dl != 0.0 {
+                    b.epoch = b.epoch.wrapping_add(1);
+                }
                 self.impulse_w[d] = new;
                 sums.dwr2 += (col * dl).length_squared();
                 sums.wr2 += (col * new).length_squared();

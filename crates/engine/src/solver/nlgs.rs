@@ -45,6 +45,16 @@
 //! stabilisation of the drift alone: a contact whose overlap is its elastic deflection is not
 //! touched, and the speed is part of `q` (and of the residual's scale).
 
+//!
+//! # Skipping still contacts
+//!
+//! Step 2 solves contact α exactly with the others fixed, so while neither of its bodies'
+//! velocities changes, α stays solved. With [`SolverSettings::skip`] `η > 0` each body counts
+//! the changes of its velocity (at the contact points, accumulated until they pass
+//! `ε = η τ q / √N`), α remembers the counts when it was last solved, and a sweep skips α
+//! while they are unchanged; every eighth sweep updates every contact. The residual checks
+//! read every contact.
+
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
 use super::{SolverSettings, StopRule};
@@ -84,7 +94,32 @@ pub struct Nlgs {
     pub overlap_per_impulse: f64,
     /// Excess overlap the recovery tolerates (m).
     pub recovery_slop: f64,
+    /// The skip threshold (m/s, see [`SolverSettings::skip`]); 0: no skipping and no
+    /// tracking of the bodies' changes.
+    pub(crate) skip_drift: f64,
+    /// Whether this sweep may skip (tracking goes on in the sweeps that update every contact).
+    pub(crate) skip_now: bool,
 }
+
+/// The skip threshold of a solve (m/s): `η τ q / √N` with `η` = [`SolverSettings::skip`],
+/// `τ` the natural-map tolerance, `q` the residual's scale and `N` the rows: `N` contacts each
+/// off by the threshold would add up to `η` times the tolerance. 0 (no skipping) when skipping
+/// is off or no natural-map tolerance stops the solve (nothing then bounds what is skipped).
+pub(crate) fn skip_threshold(s: &SolverSettings, q: f64, rows: usize) -> f64 {
+    let tol = match s.norm {
+        super::ConvergenceNorm::NaturalMap => s.tolerance.min(s.residual_tolerance),
+        super::ConvergenceNorm::Quad => s.residual_tolerance,
+    };
+    if s.skip > 0.0 && tol.is_finite() {
+        s.skip * tol * q / (rows.max(1) as f64).sqrt()
+    } else {
+        0.0
+    }
+}
+
+/// Every this many sweeps, a solve that skips updates every contact: skipping can then slow
+/// Gauss-Seidel by at most this factor, never stall it short of the tolerance.
+const FULL_SWEEP_EVERY: usize = 8;
 
 /// Sums carried through a sweep.
 #[derive(Clone, Copy, Default, Debug, PartialEq)]
@@ -159,7 +194,11 @@ impl Nlgs {
         };
         let dr = rnew - c.r;
         if dr != DVec3::ZERO {
-            c.apply(v, dr);
+            if self.skip_drift > 0.0 {
+                c.apply_tracked(v, dr, self.skip_drift as f32);
+            } else {
+                c.apply(v, dr);
+            }
         }
         c.r = rnew;
         sums.dwr2 += (c.w * dr).length_squared();
@@ -254,10 +293,40 @@ impl Nlgs {
         status: &mut [ContactStatus],
     ) -> SweepSums {
         let mut sums = SweepSums::default();
+        if self.skip_drift > 0.0 {
+            for (c, st) in locals.iter_mut().zip(status.iter_mut()) {
+                self.update_or_skip(c, v, st, &mut sums);
+            }
+            return sums;
+        }
         for (c, st) in locals.iter_mut().zip(status.iter_mut()) {
             *st = self.update_contact(c, v, &mut sums);
         }
         sums
+    }
+
+    /// With skipping on: [`Self::update_contact`], unless this sweep may skip and neither body
+    /// moved past the threshold since the contact was last solved (its local problem is then
+    /// still solved within that change, and its status stands).
+    #[inline(always)]
+    fn update_or_skip<B: BodyAccess + ?Sized>(
+        &self,
+        c: &mut LocalProblem,
+        v: &mut B,
+        st: &mut ContactStatus,
+        sums: &mut SweepSums,
+    ) {
+        if self.skip_now && c.seen == c.epochs(v) {
+            return;
+        }
+        *st = self.update_contact(c, v, sums);
+        c.seen = c.epochs(v);
+    }
+
+    /// The threshold and skip flag of sweep `k` of a solve whose threshold is `drift`.
+    pub(crate) fn for_sweep(&mut self, k: usize, drift: f64) {
+        self.skip_drift = drift;
+        self.skip_now = k > 1 && !k.is_multiple_of(FULL_SWEEP_EVERY);
     }
 
     /// Sweep `k` (1-based) of a solve: forward, or with [`SolverSettings::symmetric`] every
@@ -274,7 +343,11 @@ impl Nlgs {
         }
         let mut sums = SweepSums::default();
         for (c, st) in locals.iter_mut().zip(status.iter_mut()).rev() {
-            *st = self.update_contact(c, v, &mut sums);
+            if self.skip_drift > 0.0 {
+                self.update_or_skip(c, v, st, &mut sums);
+            } else {
+                *st = self.update_contact(c, v, &mut sums);
+            }
         }
         sums
     }
@@ -321,6 +394,8 @@ impl Nlgs {
         // 1. Scale of the residual: free local velocities.
         let q2 = self.free_scale2(locals, v) + drive::scale_sum(drives, v);
         let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
+        let drift = skip_threshold(&self.settings, q, locals.len() + drives.len());
+        let mut this = self.clone();
         self.warm_start(locals, v);
         let mut report = SolveReport::default();
         if locals.is_empty() && drives.is_empty() {
@@ -330,7 +405,8 @@ impl Nlgs {
         let s = &self.settings;
         let mut stop = StopRule::new();
         for k in 1..=s.max_iterations {
-            let mut sums = self.sweep_k(k, locals, v, status);
+            this.for_sweep(k, drift);
+            let mut sums = this.sweep_k(k, locals, v, status);
             sums += drive::sweep(drives, v);
             report.iterations = k;
             report.quad = sums.quad();
@@ -389,6 +465,8 @@ mod tests {
             w: DVec3::ZERO,
             inv_mass,
             inv_inertia: DMat3::IDENTITY * 6.0 * inv_mass,
+            epoch: 0,
+            drift: 0.0,
         };
         let bodies = vec![
             body(0.0, 0.0),
@@ -413,6 +491,8 @@ mod tests {
             inv_h: 1.0 / 5e-4,
             overlap_per_impulse: 0.0,
             recovery_slop: 0.0,
+            skip_drift: 0.0,
+            skip_now: false,
         };
         let terms: Vec<f64> = locals
             .iter()
