@@ -91,7 +91,8 @@ pub struct SolverSettings {
     /// the natural-map tolerance, `q` the residual's scale and `N` the number of rows: its
     /// local problem is still solved within that change, so the sweep costs only where the
     /// solution moves. Every eighth sweep updates every contact, so Gauss-Seidel slows by at
-    /// most that factor and never stalls; the residual checks see every contact. Off when no
+    /// most that factor and never stalls; the residual checks see every contact (the Quad norm
+    /// of a sweep, only those it updated). Off when no
     /// natural-map tolerance stops the solve (`residual_tolerance = inf` with the Quad norm).
     #[serde(skip_serializing_if = "is_zero")]
     pub skip: f64,
