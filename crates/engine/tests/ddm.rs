@@ -381,7 +381,7 @@ fn skipping_sweeps_reach_the_same_solution() {
             rep.converged && rep.residual <= 1e-6,
             "skip {skip}: {rep:?}"
         );
-        // At most every eighth sweep is a full one.
+        // Every eighth sweep is a full one: at most eight times the sweeps.
         assert!(
             rep.iterations <= 8 * full.iterations + 8,
             "skip {skip}: {} sweeps, {} without skipping",
