@@ -250,12 +250,15 @@ class Simulation:
         ``(n, 3)``, ``mu`` ``(n,)``, ``scale`` (the norm the residual is relative to) and
         ``compliance`` (``c = 1/(k h²)`` of compliant contacts, already in ``W`` and ``q``; 0
         for rigid ones) and ``tangential_compliance`` (``1/(k_t h²)`` with a tangential
-        stiffness, on the tangential diagonal of ``W``; 0 without).
+        stiffness, on the tangential diagonal of ``W``; 0 without); ``compliances`` ``(n, 2)``
+        holds each contact's normal and tangential compliance as in ``W`` (the two above, or
+        less for a loaded contact under ``max_closure``'s hyperbolic law, linearised at the
+        force it carried).
 
         Its global form (FCLIB's ``fclib_global``, Siconos' ``GlobalFrictionContactProblem``)
         over the ``bodies`` the contacts move (world indices, 6 velocities each: linear then
         angular): ``v = v_free + M_inv H r``, ``u = H.T v + b``, so ``W = H.T M_inv H`` (plus
-        ``compliance`` on the normal rows, ``tangential_compliance`` on the tangential ones)
+        ``compliances`` on the diagonal: normal, then tangential twice, per contact)
         and ``q = H.T v_free + b`` (``b``: the driven and fixed bodies' motion, the gap shift
         and minus the compliances times the previous step's impulses).
         ``H`` ``(6 nb, 3 n)``, ``M`` (masses, world inertia tensors) and ``M_inv`` (the

@@ -439,6 +439,31 @@ def test_fclib_round_trip(tmp_path):
         assert f["fclib_local/W/m"][0] == 3 * len(p["mu"])
 
 
+def test_closure_law_compliances_are_those_in_w(tmp_path):
+    # With `max_closure` a loaded contact is stiffer than an unloaded one: its compliance in W
+    # is c / (1 + F/(k V_m))², F the force it carried (the hyperbola linearised there).
+    text = open(os.path.join(ROOT, "examples", "pile.toml")).read()
+    assert "contact_stiffness" in text
+    text = text.replace("[simulation]\n", "[simulation]\nmax_closure = 2e-7\n", 1)
+    path = tmp_path / "pile.toml"
+    path.write_text(text)
+    sim = ballast.Simulation.from_toml(str(path))
+    sim.step(400)
+    p = sim.contact_problem()
+    n = len(p["mu"])
+    c = p["compliances"]
+    assert c.shape == (n, 2)
+    assert np.all(c[:, 0] <= p["compliance"]) and np.all(c[:, 0] > 0)
+    assert np.any(c[:, 0] < 0.5 * p["compliance"])
+    # Normal and tangential stiffen by the same factor.
+    ratio = p["tangential_compliance"] / p["compliance"]
+    assert np.allclose(c[:, 1], ratio * c[:, 0], rtol=1e-12, atol=0)
+    W2 = (p["H"].T @ p["M_inv"] @ p["H"]).toarray() + np.diag(
+        np.column_stack([c[:, 0], c[:, 1], c[:, 1]]).reshape(-1))
+    W = p["W"].toarray()
+    assert np.abs(W - W2).max() <= 1e-12 * np.abs(W2).max()
+
+
 def test_global_form_of_the_contact_problem():
     # A settling pile: grains against each other and against the box's fixed walls.
     sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))
@@ -454,6 +479,7 @@ def test_global_form_of_the_contact_problem():
     normal = np.zeros(3 * n)
     normal[0::3] = 1.0
     assert p["compliance"] > 0 and p["tangential_compliance"] > 0
+    assert np.array_equal(p["compliances"][:, 0], np.full(n, p["compliance"]))
     W2 = (H.T @ M_inv @ H).toarray() + np.diag(
         p["compliance"] * normal + p["tangential_compliance"] * (1.0 - normal))
     assert np.abs(W.toarray() - W2).max() <= 1e-12 * np.abs(W2).max()

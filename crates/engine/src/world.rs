@@ -14,7 +14,7 @@
 use crate::bodies::{BodyKind, BodySet};
 use crate::contacts::ContactSet;
 use crate::detection::{Detector, RawContact};
-use crate::laws::FrictionTable;
+use crate::laws::{Elastic, FrictionTable};
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::build_local_problems;
@@ -60,6 +60,13 @@ pub struct StepSettings {
     /// then carries the elastic share of its load, not any of the rigid law's self-stresses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tangential_stiffness: Option<f64>,
+    /// Maximum closure `V_m` of a compliant contact point (m): its elastic deflection under a
+    /// force `F` is `F V_m/(k V_m + F)` instead of `F/k`, the hyperbolic closure law of rock
+    /// joints (see [`crate::laws::closure`]): as soft as [`Self::contact_stiffness`] under light
+    /// loads, stiffer without bound as the deflection nears `V_m`. `None`: the linear law.
+    /// Only with [`Self::contact_stiffness`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_closure: Option<f64>,
     /// Overlap recovery of the compliant law, β ∈ [0, 1]: the fraction of a contact's overlap
     /// in excess of its elastic deflection `F/k` (beyond [`Self::overlap_slop`]) that the law
     /// asks the contact to remove within a step (a separation speed `β excess / h` added to
@@ -95,6 +102,29 @@ pub fn check_contact_stiffness(k: Option<f64>) -> Result<Option<f64>, String> {
     }
 }
 
+/// Checks a setting of the compliant law that needs `simulation.contact_stiffness`: absent,
+/// or `> 0` with a finite stiffness (`normal`, as written); `inf` means off (`None`).
+fn check_compliant_setting(
+    field: &str,
+    value: Option<f64>,
+    normal: Option<f64>,
+    allowed: &str,
+) -> Result<Option<f64>, String> {
+    let normal = check_contact_stiffness(normal).unwrap_or(None);
+    match value {
+        None => Ok(None),
+        Some(v) if v == f64::INFINITY => Ok(None),
+        Some(v) if v > 0.0 && v.is_finite() => match normal {
+            Some(_) => Ok(Some(v)),
+            None => Err(format!(
+                "simulation.{field} = {v} needs compliant contacts: set \
+                 simulation.contact_stiffness (> 0 N/m) too"
+            )),
+        },
+        Some(v) => Err(format!("simulation.{field} = {v} must be {allowed}")),
+    }
+}
+
 /// Checks a scenario's `simulation.tangential_stiffness` (N/m): absent, or `> 0` with a
 /// finite `simulation.contact_stiffness` (`normal`, as written); `inf` means rigid
 /// tangentially (`None`).
@@ -102,21 +132,18 @@ pub fn check_tangential_stiffness(
     k: Option<f64>,
     normal: Option<f64>,
 ) -> Result<Option<f64>, String> {
-    let normal = check_contact_stiffness(normal).unwrap_or(None);
-    match k {
-        None => Ok(None),
-        Some(k) if k == f64::INFINITY => Ok(None),
-        Some(k) if k > 0.0 && k.is_finite() => match normal {
-            Some(_) => Ok(Some(k)),
-            None => Err(format!(
-                "simulation.tangential_stiffness = {k} needs compliant contacts: set \
-                 simulation.contact_stiffness (> 0 N/m) too"
-            )),
-        },
-        Some(k) => Err(format!(
-            "simulation.tangential_stiffness = {k} must be > 0 N/m (inf: rigid sticking)"
-        )),
-    }
+    check_compliant_setting(
+        "tangential_stiffness",
+        k,
+        normal,
+        "> 0 N/m (inf: rigid sticking)",
+    )
+}
+
+/// Checks a scenario's `simulation.max_closure` (m): absent, or `> 0` with a finite
+/// `simulation.contact_stiffness` (`normal`, as written); `inf` means the linear law (`None`).
+pub fn check_max_closure(vm: Option<f64>, normal: Option<f64>) -> Result<Option<f64>, String> {
+    check_compliant_setting("max_closure", vm, normal, "> 0 m (inf: the linear law)")
 }
 
 impl Default for StepSettings {
@@ -130,6 +157,7 @@ impl Default for StepSettings {
             reuse_distance: default_reuse_distance(),
             contact_stiffness: None,
             tangential_stiffness: None,
+            max_closure: None,
             overlap_recovery: default_overlap_recovery(),
             overlap_slop: default_overlap_slop(),
             solver: SolverSettings::default(),
@@ -402,6 +430,10 @@ impl World {
                 .contact_stiffness
                 .map_or(0.0, |k| 1.0 / (k * h)),
             recovery_slop: self.settings.overlap_slop,
+            closure_impulse: match (self.settings.contact_stiffness, self.settings.max_closure) {
+                (Some(k), Some(vm)) => k * h * vm,
+                _ => 0.0,
+            },
         }
     }
 
@@ -615,9 +647,9 @@ impl World {
         // With the overlap recovery the law owns the elastic deflection; without it, the
         // correction heals whole overlaps as before.
         let elastic = if nlgs.recovery > 0.0 {
-            nlgs.overlap_per_impulse
+            nlgs.elastic()
         } else {
-            0.0
+            Elastic::NONE
         };
 
         // 3. NLGS, monolithic or domain-decomposed, then the overlap correction (on the
@@ -654,7 +686,7 @@ impl World {
                     Some(ddm::CorrectionPass {
                         settings: &s.correction,
                         h,
-                        elastic_per_impulse: elastic,
+                        elastic,
                         pseudo: &mut self.scratch.pseudo,
                     }),
                 );

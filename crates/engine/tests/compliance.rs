@@ -82,6 +82,35 @@ fn a_resting_block_sinks_by_its_weight_over_the_stiffness() {
     assert!(w.bodies.velocity[1].length() < 1e-9);
 }
 
+/// With a maximum closure `V_m` the contact follows the hyperbola `F = k δ/(1 − δ/V_m)`: the
+/// cube of [`cube_on_floor`] (corner loads m g/4 = 6.6 N) on contacts of initial stiffness
+/// 1e6 N/m and `V_m` = 5 µm (`k V_m` = 5 N) sinks by `F V_m/(k V_m + F)` = 2.85 µm, not the
+/// linear law's 6.6 µm, exactly: each step's stiffness is the hyperbola's secant between the
+/// force the contact carried and the one it carries (measured 3e-10 from it; a tangent taken
+/// at the carried force alone left the cube 5.07 µm deep, loaded within its first steps).
+#[test]
+fn a_resting_block_sinks_by_the_hyperbolas_deflection() {
+    let (k, vm) = (1e6, 5e-6);
+    let (mut w, m) = cube_on_floor(Some(k), 0.6);
+    w.settings.max_closure = Some(vm);
+    for _ in 0..3000 {
+        let r = w.step();
+        assert!(r.solve.converged, "{:?}", r.solve);
+    }
+    let f = m * G / 4.0;
+    let expected = f * vm / (k * vm + f);
+    let sink = 0.05 - w.bodies.position[1].z;
+    assert!(
+        (sink - expected).abs() <= 1e-6 * expected,
+        "sank {sink:e} m, expected {expected:e} m"
+    );
+    for i in 0..4 {
+        let fi = w.contacts.impulse[i].x / w.settings.dt;
+        assert!((fi - f).abs() <= 1e-6 * m * G, "corner force {fi} N");
+    }
+    assert!(w.bodies.velocity[1].length() < 1e-9);
+}
+
 /// With the overlap recovery on, the position correction heals overlaps beyond the elastic
 /// deflection the contact's force implies, not the deflection itself: with the correction on
 /// (β = 0.2, slop 10 µm), a cube on springs of 1e5 N/m still sinks by `m g / (4 k)` = 66 µm
@@ -230,8 +259,9 @@ fn stiff_contacts_need_fewer_sweeps_in_a_jammed_pile() {
 /// threads under DDM, and a checkpointed run resumes bit-identical (the law's memory is the
 /// impulses the checkpoint keeps), with the overlap recovery off and on (then the correction
 /// too reads the impulses: it heals only the excess over `F/k`), with a tangential
-/// stiffness (whose memory is the tangential impulses), and with sweeps that skip contacts
-/// whose bodies did not move (`solver.skip`: the skips depend on the sweep order alone).
+/// stiffness (whose memory is the tangential impulses), with sweeps that skip contacts
+/// whose bodies did not move (`solver.skip`: the skips depend on the sweep order alone), and
+/// with the hyperbolic closure law (whose stiffness is a function of the impulses).
 #[test]
 fn compliant_runs_are_deterministic_and_resume_exactly() {
     let ddm = DdmSettings {
@@ -239,19 +269,22 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
         min_parallel_contacts: 1,
         ..Default::default()
     };
-    let pile_with = |(beta, kt, skip): (f64, Option<f64>, f64), ddm: Option<DdmSettings>| {
+    let pile_with = |(beta, kt, skip, vm): (f64, Option<f64>, f64, Option<f64>),
+                     ddm: Option<DdmSettings>| {
         let mut w = pile(Some(1e7), ddm);
         w.settings.overlap_recovery = beta;
         w.settings.tangential_stiffness = kt;
         w.settings.solver.skip = skip;
+        w.settings.max_closure = vm;
         w
     };
     let mut digests = Vec::new();
     for beta in [
-        (0.0, None, 0.0),
-        (0.2, None, 0.0),
-        (0.2, Some(5e6), 0.0),
-        (0.2, Some(5e6), 1.0),
+        (0.0, None, 0.0, None),
+        (0.2, None, 0.0, None),
+        (0.2, Some(5e6), 0.0, None),
+        (0.2, Some(5e6), 1.0, None),
+        (0.2, Some(5e6), 0.0, Some(1e-4)),
     ] {
         let digest = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new()
@@ -264,7 +297,7 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
                 state_digest(&w.bodies)
             })
         };
-        assert_eq!(digest(1), digest(2), "β, k_t, skip {beta:?}");
+        assert_eq!(digest(1), digest(2), "β, k_t, skip, V_m {beta:?}");
         digests.push(digest(1));
 
         let mut whole = pile_with(beta, None);
@@ -284,7 +317,7 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
         assert_eq!(
             state_digest(&whole.bodies),
             state_digest(&resumed.bodies),
-            "β, k_t, skip {beta:?}"
+            "β, k_t, skip, V_m {beta:?}"
         );
     }
     assert_ne!(digests[0], digests[1], "the recovery should change the run");
@@ -293,22 +326,28 @@ fn compliant_runs_are_deterministic_and_resume_exactly() {
         "the tangential spring should change the run"
     );
     assert_ne!(digests[2], digests[3], "skipping should change the iterate");
+    assert_ne!(
+        digests[2], digests[4],
+        "the closure law should change the run"
+    );
+}
+
+/// A box dropped 10 mm onto a plane, 50 steps, with `simulation` keys `k` added.
+fn cube_scenario(k: &str) -> String {
+    format!(
+        "[simulation]\ndt = 1e-3\nsteps = 50\n{k}\n[[body]]\nshape = \"plane\"\nkind = \"fixed\"\n\
+         point = [0, 0, 0]\nnormal = [0, 0, 1]\n[[body]]\nshape = \"box\"\nhalf_extents = [0.05, 0.05, 0.05]\n\
+         center = [0, 0, 0.06]\nmaterial = \"stone\"\n[materials]\nstone = 2700\n\
+         [friction]\ndefault = 0.8\n"
+    )
 }
 
 /// `[simulation] contact_stiffness`: `inf` is rigid (the same digest as no key), a value that
 /// is not > 0 is refused naming the field.
 #[test]
 fn scenario_contact_stiffness() {
-    let text = |k: &str| {
-        format!(
-            "[simulation]\ndt = 1e-3\nsteps = 50\n{k}\n[[body]]\nshape = \"plane\"\nkind = \"fixed\"\n\
-             point = [0, 0, 0]\nnormal = [0, 0, 1]\n[[body]]\nshape = \"box\"\nhalf_extents = [0.05, 0.05, 0.05]\n\
-             center = [0, 0, 0.06]\nmaterial = \"stone\"\n[materials]\nstone = 2700\n\
-             [friction]\ndefault = 0.8\n"
-        )
-    };
     let digest = |k: &str| {
-        let s = Scenario::from_toml(&text(k)).unwrap();
+        let s = Scenario::from_toml(&cube_scenario(k)).unwrap();
         let mut w = s.build().unwrap();
         for _ in 0..50 {
             w.step();
@@ -322,7 +361,7 @@ fn scenario_contact_stiffness() {
     assert_eq!(k, Some(1e5));
     assert_ne!(soft, rigid);
     for bad in ["0", "-1e7", "nan"] {
-        let e = Scenario::from_toml(&text(&format!("contact_stiffness = {bad}")))
+        let e = Scenario::from_toml(&cube_scenario(&format!("contact_stiffness = {bad}")))
             .and_then(|s| s.validate().map(|_| s))
             .unwrap_err()
             .to_string();
@@ -330,6 +369,43 @@ fn scenario_contact_stiffness() {
             e.contains("simulation.contact_stiffness") && e.contains("> 0 N/m"),
             "{bad}: {e}"
         );
+    }
+}
+
+/// `[simulation] max_closure`: `inf` is the linear law (the same digest as no key), a value
+/// changes the run, and one that is not > 0, or comes without `contact_stiffness`, is refused
+/// naming the field.
+#[test]
+fn scenario_max_closure() {
+    let digest = |k: &str| {
+        let s = Scenario::from_toml(&cube_scenario(k)).unwrap();
+        s.validate().unwrap();
+        let mut w = s.build().unwrap();
+        for _ in 0..50 {
+            w.step();
+        }
+        (state_digest(&w.bodies), w.settings.max_closure)
+    };
+    let (linear, none) = digest("contact_stiffness = 1e5");
+    assert_eq!(none, None);
+    assert_eq!(
+        digest("contact_stiffness = 1e5\nmax_closure = inf"),
+        (linear.clone(), None)
+    );
+    let (hyperbolic, vm) = digest("contact_stiffness = 1e5\nmax_closure = 1e-4");
+    assert_eq!(vm, Some(1e-4));
+    assert_ne!(hyperbolic, linear);
+    for bad in [
+        "contact_stiffness = 1e5\nmax_closure = 0",
+        "contact_stiffness = 1e5\nmax_closure = -1e-3",
+        "contact_stiffness = 1e5\nmax_closure = nan",
+        "max_closure = 1e-3",
+    ] {
+        let e = Scenario::from_toml(&cube_scenario(bad))
+            .and_then(|s| s.validate().map(|_| s))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("simulation.max_closure"), "{bad}: {e}");
     }
 }
 

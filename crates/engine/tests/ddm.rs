@@ -2,7 +2,7 @@
 //! number of threads, agreement at convergence.
 
 use ballast_engine::digest::state_digest;
-use ballast_engine::laws::ContactStatus;
+use ballast_engine::laws::{ContactStatus, Elastic};
 use ballast_engine::math::DVec3;
 use ballast_engine::scenario::presets::pile;
 use ballast_engine::solver::correction::{self, CorrectionSettings};
@@ -113,12 +113,12 @@ fn ddm_with_single_sweeps_equals_monolithic_in_partition_order() {
             Some(ddm::CorrectionPass {
                 settings: &correction,
                 h,
-                elastic_per_impulse: 0.0,
+                elastic: Elastic::NONE,
                 pseudo: &mut p_ddm,
             }),
         );
         let mut rows = Vec::new();
-        let overlapping = correction::overlaps(&correction, h, 0.0, &l2, &mut rows);
+        let overlapping = correction::overlaps(&correction, h, Elastic::NONE, &l2, &mut rows);
         assert!(
             corrected && overlapping > 10,
             "{dims:?}: {overlapping} overlaps"
@@ -127,7 +127,7 @@ fn ddm_with_single_sweeps_equals_monolithic_in_partition_order() {
         assert!(correction::pseudo_velocities(
             &correction,
             h,
-            0.0,
+            Elastic::NONE,
             &l2,
             &v2,
             &mut p_mono

@@ -599,6 +599,13 @@ fn problem_dict<'py>(py: Python<'py>, p: &ContactProblem) -> PyResult<Bound<'py,
     d.set_item("scale", p.scale)?;
     d.set_item("compliance", p.compliance)?;
     d.set_item("tangential_compliance", p.tangential_compliance)?;
+    let flat: Vec<f64> = p.compliances.iter().flatten().copied().collect();
+    d.set_item(
+        "compliances",
+        flat.into_pyarray(py)
+            .reshape([p.compliances.len(), 2])
+            .expect("n × 2 elements"),
+    )?;
     Ok(d)
 }
 
@@ -683,6 +690,7 @@ fn solve_fc3d_blocks<'py>(
         scale,
         compliance: 0.0,
         tangential_compliance: 0.0,
+        compliances: vec![[0.0; 2]; n],
     };
     let mut r = match &r0 {
         Some(a) => vec3s(a, "r0")?,

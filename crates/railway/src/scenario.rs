@@ -8,6 +8,7 @@
 //! reuse_distance = 1e-5 # m, contact geometry reused until a grain moved this far (0 = never)
 //! contact_stiffness = 1e7 # N/m per contact point (default: rigid contacts)
 //! tangential_stiffness = 1e7 # N/m, sticking contacts' spring (default: rigid sticking)
+//! max_closure = 7.5e-4  # m, hyperbolic closure: deflection F Vm/(k Vm + F) (default: F/k)
 //! overlap_recovery = 0.2  # compliant contacts: fraction of the overlap beyond F/k removed per step (engine default: 0)
 //! overlap_slop = 2.5e-4   # m, excess overlap the recovery tolerates
 //! output_interval = 25  # steps between rows of series.csv
@@ -71,6 +72,10 @@ pub struct TrackSimulation {
     /// `inf`: rigid sticking (see `ballast_engine::world::StepSettings::tangential_stiffness`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tangential_stiffness: Option<f64>,
+    /// Maximum closure of a contact point (m), with `contact_stiffness` only; `None` or `inf`:
+    /// the linear law (see `ballast_engine::world::StepSettings::max_closure`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_closure: Option<f64>,
     /// Overlap recovery β ∈ [0, 1] of the compliant law (see
     /// `ballast_engine::world::StepSettings::overlap_recovery`).
     pub overlap_recovery: f64,
@@ -101,6 +106,7 @@ impl Default for TrackSimulation {
             reuse_distance: ballast_engine::world::default_reuse_distance(),
             contact_stiffness: None,
             tangential_stiffness: None,
+            max_closure: None,
             // Tines wedge grains against the block: there the rate form's overlaps drift by
             // millimetres without it (BENCHMARKS.md, the overlap recovery).
             overlap_recovery: 0.2,
@@ -471,6 +477,10 @@ impl TrackScenario {
         ) {
             return Err(ballast_engine::ScenarioError(e).into());
         }
+        if let Err(e) = ballast_engine::world::check_max_closure(s.max_closure, s.contact_stiffness)
+        {
+            return Err(ballast_engine::ScenarioError(e).into());
+        }
         check_range(
             "simulation.overlap_recovery",
             s.overlap_recovery,
@@ -571,6 +581,11 @@ impl TrackScenario {
             contact_stiffness: stiffness,
             tangential_stiffness: ballast_engine::world::check_tangential_stiffness(
                 self.simulation.tangential_stiffness,
+                self.simulation.contact_stiffness,
+            )
+            .unwrap_or(None),
+            max_closure: ballast_engine::world::check_max_closure(
+                self.simulation.max_closure,
                 self.simulation.contact_stiffness,
             )
             .unwrap_or(None),

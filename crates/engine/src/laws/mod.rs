@@ -1,8 +1,10 @@
 //! Contact laws: Signorini-Coulomb with restitution 0, friction coefficients per pair of groups,
 //! and the exact solver of the local 3×3 problem.
 
+pub mod closure;
 pub mod coulomb;
 pub mod friction;
 
+pub use closure::Elastic;
 pub use coulomb::{solve_local, ContactStatus};
 pub use friction::FrictionTable;

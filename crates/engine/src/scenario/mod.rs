@@ -11,6 +11,7 @@
 //! reuse_distance = 1e-5 # m: contact geometry reused until a grain moved this far (0 = never)
 //! contact_stiffness = 1e7 # N/m per contact point (absent or inf = rigid contacts)
 //! tangential_stiffness = 1e7 # N/m, sticking contacts' spring (absent = rigid sticking)
+//! max_closure = 7.5e-4   # m: hyperbolic law, deflection F Vm/(k Vm + F) (absent = F/k)
 //! overlap_recovery = 0   # compliant law: fraction of the overlap beyond F/k removed per step
 //! overlap_slop = 2.5e-4  # m: excess overlap the recovery tolerates
 //! output_interval = 50 # steps between rows of series.csv
@@ -115,6 +116,10 @@ pub struct Simulation {
     /// `inf`: rigid sticking (see `StepSettings::tangential_stiffness`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tangential_stiffness: Option<f64>,
+    /// Maximum closure of a contact point (m), with `contact_stiffness` only; absent or `inf`:
+    /// the linear law (see `StepSettings::max_closure`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_closure: Option<f64>,
     /// Overlap recovery β ∈ [0, 1] of the compliant law (see `StepSettings::overlap_recovery`).
     #[serde(default = "crate::world::default_overlap_recovery")]
     pub overlap_recovery: f64,
@@ -555,6 +560,8 @@ impl Scenario {
         crate::world::check_contact_stiffness(s.contact_stiffness).map_err(ScenarioError)?;
         crate::world::check_tangential_stiffness(s.tangential_stiffness, s.contact_stiffness)
             .map_err(ScenarioError)?;
+        crate::world::check_max_closure(s.max_closure, s.contact_stiffness)
+            .map_err(ScenarioError)?;
         crate::world::check_overlap_recovery(s.overlap_recovery, s.overlap_slop)
             .map_err(ScenarioError)?;
         if s.output_interval == 0 {
@@ -888,6 +895,8 @@ impl Scenario {
                 s.contact_stiffness,
             )
             .unwrap_or(None),
+            max_closure: crate::world::check_max_closure(s.max_closure, s.contact_stiffness)
+                .unwrap_or(None),
             overlap_recovery: s.overlap_recovery,
             overlap_slop: s.overlap_slop,
             solver: self.solver.clone(),

@@ -41,6 +41,7 @@ pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenari
             reuse_distance: crate::world::default_reuse_distance(),
             contact_stiffness: None,
             tangential_stiffness: None,
+            max_closure: None,
             overlap_recovery: crate::world::default_overlap_recovery(),
             overlap_slop: crate::world::default_overlap_slop(),
             output_interval: 50,

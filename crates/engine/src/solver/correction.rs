@@ -15,10 +15,12 @@
 //! to overlap by its elastic deflection `r̄ₙ/(k h)`, with `r̄ₙ` the normal impulse of the step
 //! before (the force that goes with the step's initial gap; the rate form keeps
 //! `δ − r̄ₙ/(k h)` constant): only the excess over it counts as an overlap, `g_α` above is
-//! then `g_α + r̄ₙ/(k h)`, and the correction leaves a loaded spring its deflection.
+//! then `g_α + r̄ₙ/(k h)` (with a maximum closure, the hyperbola's deflection of
+//! [`crate::laws::closure`]), and the correction leaves a loaded spring its deflection.
 //! β = 0 switches it off (plain Moreau-Jean, as LMGC90).
 
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
+use crate::laws::Elastic;
 use crate::math::{DMat3, DVec3};
 use crate::ScenarioError;
 use serde::{Deserialize, Serialize};
@@ -115,12 +117,12 @@ pub(crate) fn at_rest(b: &SolverBody, rotation: bool) -> SolverBody {
 
 /// Lists in `out` the contacts of `locals` overlapping beyond the slop (with `guard`, every
 /// contact), in order, with `p = 0`; returns how many overlap. None when the correction is
-/// off. `elastic_per_impulse` is `1/(k h)` for compliant contacts (the deflection the normal
-/// impulse of the step before implies is not an overlap), 0 for rigid ones.
+/// off. `elastic` is the compliant contacts' deflection law (the deflection the normal impulse
+/// of the step before implies is not an overlap), [`Elastic::NONE`] for rigid ones.
 pub fn overlaps(
     settings: &CorrectionSettings,
     h: f64,
-    elastic_per_impulse: f64,
+    elastic: Elastic,
     locals: &[LocalProblem],
     out: &mut Vec<Overlap>,
 ) -> usize {
@@ -131,7 +133,7 @@ pub fn overlaps(
     let mut overlapping = 0;
     out.extend(locals.iter().enumerate().filter_map(|(k, c)| {
         // Exact for rigid contacts: adding 0 leaves the gap's bits.
-        let gap = c.gap + elastic_per_impulse * c.r_prev.max(0.0);
+        let gap = c.gap + elastic.deflection(c.r_prev);
         let target = if gap < -settings.slop {
             overlapping += 1;
             (settings.fraction * (-gap - settings.slop)).min(settings.max_push) / h
@@ -177,12 +179,12 @@ pub(crate) fn sweep<B: BodyAccess + ?Sized>(
 
 /// Computes the pseudo-velocities in `pseudo` (one per body, zero-initialised here; inverse
 /// masses copied from `bodies`) for the overlapping contacts among `locals`, by
-/// `settings.sweeps` sweeps in contact order (`elastic_per_impulse` as in [`overlaps`]).
+/// `settings.sweeps` sweeps in contact order (`elastic` as in [`overlaps`]).
 /// Returns whether any contact overlapped.
 pub fn pseudo_velocities(
     settings: &CorrectionSettings,
     h: f64,
-    elastic_per_impulse: f64,
+    elastic: Elastic,
     locals: &[LocalProblem],
     bodies: &[SolverBody],
     pseudo: &mut Vec<SolverBody>,
@@ -190,7 +192,7 @@ pub fn pseudo_velocities(
     pseudo.clear();
     pseudo.extend(bodies.iter().map(|b| at_rest(b, settings.rotation)));
     let mut rows = Vec::new();
-    if overlaps(settings, h, elastic_per_impulse, locals, &mut rows) == 0 {
+    if overlaps(settings, h, elastic, locals, &mut rows) == 0 {
         return false;
     }
     for _ in 0..settings.sweeps {
@@ -230,7 +232,7 @@ mod tests {
         assert!(pseudo_velocities(
             settings,
             h,
-            0.0,
+            Elastic::NONE,
             &locals,
             &bodies,
             &mut pseudo
@@ -295,7 +297,7 @@ mod tests {
             assert!(pseudo_velocities(
                 &s,
                 h,
-                0.0,
+                Elastic::NONE,
                 &locals[..1],
                 &bodies,
                 &mut pseudo
@@ -328,11 +330,29 @@ mod tests {
             ..Default::default()
         };
         let mut rows = Vec::new();
-        let e = 1.0 / (k * h);
+        let e = Elastic {
+            per_impulse: 1.0 / (k * h),
+            closure_impulse: 0.0,
+        };
         locals[0].gap = -2e-4;
         assert_eq!(overlaps(&s, h, e, &locals, &mut rows), 0);
         // The same depth in a rigid contact is an overlap.
-        assert_eq!(overlaps(&s, h, 0.0, &locals, &mut rows), 1);
+        assert_eq!(overlaps(&s, h, Elastic::NONE, &locals, &mut rows), 1);
+        // With a maximum closure of 0.2 mm (k V_m = 2 kN) the hyperbola deflects by
+        // F V_m/(k V_m + F) = 0.1 mm under 2 kN: 0.1 mm deep is not an overlap, 0.2 mm is.
+        let hyperbolic = Elastic {
+            closure_impulse: k * h * 2e-4,
+            ..e
+        };
+        locals[0].gap = -1e-4 + 1e-12;
+        assert_eq!(overlaps(&s, h, hyperbolic, &locals, &mut rows), 0);
+        locals[0].gap = -2e-4;
+        assert_eq!(overlaps(&s, h, hyperbolic, &locals, &mut rows), 1);
+        assert!(
+            (rows[0].target * h - 1e-4).abs() < 1e-15,
+            "{}",
+            rows[0].target
+        );
         locals[0].gap = -1.2e-3;
         let mut pseudo = Vec::new();
         assert!(pseudo_velocities(

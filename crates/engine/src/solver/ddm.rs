@@ -29,7 +29,7 @@ use super::drive::{self, DriveRows};
 use super::nlgs::{Nlgs, SolveReport, SweepSums};
 use super::partition::{Balance, Partition, STATIC};
 use super::StopRule;
-use crate::laws::ContactStatus;
+use crate::laws::{ContactStatus, Elastic};
 use crate::ScenarioError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -542,8 +542,9 @@ pub struct CorrectionPass<'a> {
     pub settings: &'a CorrectionSettings,
     /// Time step (s).
     pub h: f64,
-    /// `1/(k h)` of compliant contacts, 0 for rigid ones (see [`correction::overlaps`]).
-    pub elastic_per_impulse: f64,
+    /// The elastic deflection of compliant contacts, [`Elastic::NONE`] for rigid ones (see
+    /// [`correction::overlaps`]).
+    pub elastic: Elastic,
     /// The pseudo-velocities, one per body in the caller's numbering (output).
     pub pseudo: &'a mut Vec<SolverBody>,
 }
@@ -737,7 +738,7 @@ fn correct(
 ) -> bool {
     let starts = &partition.starts;
     pv.clear();
-    let (settings, h, e) = (c.settings, c.h, c.elastic_per_impulse);
+    let (settings, h, e) = (c.settings, c.h, c.elastic);
     pv.par_extend(
         pb.par_iter()
             .map(|b| correction::at_rest(b, settings.rotation)),

@@ -59,7 +59,7 @@ use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
 use super::{SolverSettings, StopRule};
 use crate::laws::coulomb::{natural_map_residual, project_on_cone, solve_local_from};
-use crate::laws::ContactStatus;
+use crate::laws::{ContactStatus, Elastic};
 use crate::math::DVec3;
 use serde::{Deserialize, Serialize};
 
@@ -94,6 +94,9 @@ pub struct Nlgs {
     pub overlap_per_impulse: f64,
     /// Excess overlap the recovery tolerates (m).
     pub recovery_slop: f64,
+    /// `k h V_m` of the hyperbolic closure law (see [`crate::laws::closure`]); 0: the linear
+    /// law, every contact's compliance is [`Self::compliance`].
+    pub closure_impulse: f64,
     /// The skip threshold (m/s, see [`SolverSettings::skip`]); 0: no skipping and no
     /// tracking of the bodies' changes.
     pub(crate) skip_drift: f64,
@@ -161,9 +164,9 @@ impl Nlgs {
         let unloaded = c.r == DVec3::ZERO;
         let uf = if unloaded { u } else { u - c.w * c.r };
         // The compliant law's free velocity (exactly `uf` for rigid contacts).
-        let ct = self.tangential_compliance;
+        let (cn, ct) = self.compliances(c);
         let uf = DVec3::new(
-            uf.x - self.compliance * c.r_prev,
+            uf.x - cn * c.r_prev,
             uf.y - ct * f64::from(c.rt_prev[0]),
             uf.z - ct * f64::from(c.rt_prev[1]),
         );
@@ -178,7 +181,7 @@ impl Nlgs {
             // W⁻¹ is not stored: at large scale the sweep is bound by memory traffic, and the
             // inverse costs less than streaming 72 more bytes per contact.
             let mut w = c.w.to_mat();
-            w.x_axis.x += self.compliance;
+            w.x_axis.x += cn;
             w.y_axis.y += ct;
             w.z_axis.z += ct;
             solve_local_from(&w, &w.inverse(), self.shifted(c, uf), c.mu, c.r)
@@ -204,6 +207,35 @@ impl Nlgs {
         sums.dwr2 += (c.w * dr).length_squared();
         sums.wr2 += (c.w * rnew).length_squared();
         status
+    }
+
+    /// Contact `c`'s normal and tangential compliances at its current impulse: with the
+    /// closure law, [`Self::compliance`] and [`Self::tangential_compliance`] divided by the
+    /// secant stiffening between the force it carried and the one it carries now (see
+    /// [`crate::laws::closure`]).
+    #[inline(always)]
+    pub(crate) fn compliances(&self, c: &LocalProblem) -> (f64, f64) {
+        self.compliances_at(c, c.r.x)
+    }
+
+    /// [`Self::compliances`] with the current normal impulse `r`.
+    #[inline(always)]
+    pub(crate) fn compliances_at(&self, c: &LocalProblem, r: f64) -> (f64, f64) {
+        if self.closure_impulse > 0.0 {
+            let soft = 1.0 / self.elastic().secant(c.r_prev, r);
+            (self.compliance * soft, self.tangential_compliance * soft)
+        } else {
+            (self.compliance, self.tangential_compliance)
+        }
+    }
+
+    /// The elastic deflection law of the compliant contacts (see [`Elastic`]).
+    #[inline(always)]
+    pub fn elastic(&self) -> Elastic {
+        Elastic {
+            per_impulse: self.overlap_per_impulse,
+            closure_impulse: self.closure_impulse,
+        }
     }
 
     /// The velocity the Signorini condition acts on: `u + (max(g, 0) / hθ) n`, so that a
@@ -238,9 +270,9 @@ impl Nlgs {
     #[inline(always)]
     pub(crate) fn recovery_speed(&self, c: &LocalProblem) -> f64 {
         if self.recovery > 0.0 && c.gap <= 0.0 {
-            let excess = -c.gap - self.overlap_per_impulse * c.r_prev.max(0.0) - self.recovery_slop;
+            let excess = -c.gap - self.elastic().deflection(c.r_prev) - self.recovery_slop;
             if excess > 0.0 {
-                let omega_h = (c.w.xx() / self.compliance).sqrt();
+                let omega_h = (c.w.xx() / self.compliances_at(c, c.r_prev).0).sqrt();
                 return self.recovery.min(omega_h * (1.0 / 16.0)) * self.inv_h * excess;
             }
         }
@@ -262,12 +294,12 @@ impl Nlgs {
     #[inline]
     pub(crate) fn residual2<B: BodyAccess + ?Sized>(&self, c: &LocalProblem, v: &B) -> f64 {
         let mut u = c.velocity(v);
-        u.x += self.compliance * (c.r.x - c.r_prev);
-        let ct = self.tangential_compliance;
+        let (cn, ct) = self.compliances(c);
+        u.x += cn * (c.r.x - c.r_prev);
         u.y += ct * (c.r.y - f64::from(c.rt_prev[0]));
         u.z += ct * (c.r.z - f64::from(c.rt_prev[1]));
         // ρ = 1/W_nn makes `r − ρ u` consistent in units (N·s); dividing by ρ gives m/s.
-        let rho = 1.0 / (c.w.xx() + self.compliance);
+        let rho = 1.0 / (c.w.xx() + cn);
         (natural_map_residual(c.r, self.shifted(c, u) * rho, c.mu) / rho).powi(2)
     }
 
@@ -491,6 +523,7 @@ mod tests {
             inv_h: 1.0 / 5e-4,
             overlap_per_impulse: 0.0,
             recovery_slop: 0.0,
+            closure_impulse: 0.0,
             skip_drift: 0.0,
             skip_now: false,
         };

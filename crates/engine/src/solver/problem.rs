@@ -95,11 +95,18 @@ pub struct ContactProblem {
     /// `‖Hᵀ V_free‖` (without the gap shift): the scale of the engine's relative
     /// natural-map residual.
     pub scale: f64,
-    /// The normal compliance `c = 1/(k h²)` included in `W` and `q` (0: rigid contacts).
+    /// The normal compliance `c = 1/(k h²)` included in `W` and `q` (0: rigid contacts); with
+    /// the hyperbolic closure law, contact α's is `c` divided by the square of its stiffening
+    /// at the force it carried (the law linearised there, see [`crate::laws::closure`]), as is
+    /// its tangential one.
     pub compliance: f64,
     /// The tangential compliance `c_t = 1/(k_t h²)` included in `W` and `q` (0: rigid
     /// sticking).
     pub tangential_compliance: f64,
+    /// Each contact's normal and tangential compliance as included in `W`'s diagonal block
+    /// and in `q`: [`Self::compliance`] and [`Self::tangential_compliance`] for the linear law,
+    /// less for a loaded contact under the closure law.
+    pub compliances: Vec<[f64; 2]>,
 }
 
 /// Lever arm, sign and body of one side of a contact, for the assembly.
@@ -190,12 +197,20 @@ impl ContactProblem {
             .zip(free)
             .map(|(c, u)| {
                 let [t, s] = c.rt_prev.map(f64::from);
-                let u = DVec3::new(u.x - compliance * c.r_prev, u.y - ct * t, u.z - ct * s);
+                let (cn, ct) = nlgs.compliances_at(c, c.r_prev);
+                let u = DVec3::new(u.x - cn * c.r_prev, u.y - ct * t, u.z - ct * s);
                 nlgs.shifted(c, u)
             })
             .collect();
+        let compliances: Vec<[f64; 2]> = locals
+            .iter()
+            .map(|c| {
+                let (cn, ct) = nlgs.compliances_at(c, c.r_prev);
+                [cn, ct]
+            })
+            .collect();
         if compliance > 0.0 {
-            for a in 0..n {
+            for (a, &[compliance, ct]) in compliances.iter().enumerate() {
                 let range = w.row_start[a]..w.row_start[a + 1];
                 if let Ok(k) = w.cols[range.clone()].binary_search(&(a as u32)) {
                     let b = &mut w.blocks[range.start + k];
@@ -212,6 +227,7 @@ impl ContactProblem {
             scale,
             compliance,
             tangential_compliance: ct,
+            compliances,
         }
     }
 
