@@ -192,21 +192,21 @@ impl ContactProblem {
             .map(|(c, u)| u.length_squared() + nlgs.recovery_speed(c).powi(2))
             .sum::<f64>()
             .sqrt();
-        let q = locals
-            .iter()
-            .zip(free)
-            .map(|(c, u)| {
-                let [t, s] = c.rt_prev.map(f64::from);
-                let (cn, ct) = nlgs.compliances_at(c, c.r_prev);
-                let u = DVec3::new(u.x - cn * c.r_prev, u.y - ct * t, u.z - ct * s);
-                nlgs.shifted(c, u)
-            })
-            .collect();
         let compliances: Vec<[f64; 2]> = locals
             .iter()
             .map(|c| {
                 let (cn, ct) = nlgs.compliances_at(c, c.r_prev);
                 [cn, ct]
+            })
+            .collect();
+        let q = locals
+            .iter()
+            .zip(free)
+            .zip(&compliances)
+            .map(|((c, u), &[cn, ct])| {
+                let [t, s] = c.rt_prev.map(f64::from);
+                let u = DVec3::new(u.x - cn * c.r_prev, u.y - ct * t, u.z - ct * s);
+                nlgs.shifted(c, u)
             })
             .collect();
         if compliance > 0.0 {
