@@ -539,7 +539,6 @@ impl World {
             &self.friction,
             &self.scratch.previous,
             s.match_fraction,
-            s.contact_stiffness.is_some(),
         );
         let max_penetration = self.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g));
         times.detection = lap.lap();

@@ -80,11 +80,7 @@ impl ContactSet {
     /// impulses of `previous` where a contact persists: same bodies, and a position in body 1's
     /// frame within `match_fraction` × the smaller body radius of the old one. Each old contact
     /// is reused at most once, taken by the pair's points in order; the old world impulse is
-    /// re-projected on the new frame. With `keep_pair_impulse` (compliant contacts, whose
-    /// impulse is the spring's state), what the pair's old contacts carried and no new point
-    /// took over is shared among its overlapping points in proportion to their overlaps: a
-    /// pair keeps its total impulse when its manifold changes (see
-    /// [`share_untaken`]).
+    /// re-projected on the new frame.
     ///
     /// Every point is built in parallel straight into the arrays (kept across steps: no
     /// allocation, no serial copy). A point replays the matching of its pair's earlier points
@@ -97,7 +93,6 @@ impl ContactSet {
         friction: &FrictionTable,
         previous: &ContactSet,
         match_fraction: f64,
-        keep_pair_impulse: bool,
     ) {
         use rayon::prelude::*;
         let n = raw.len();
@@ -123,7 +118,7 @@ impl ContactSet {
             .with_min_len(4096)
             .filter(|&k| k == 0 || raw_key(&raw[k - 1]) != raw_key(&raw[k]))
             .collect();
-        let mut matched: Vec<Inherited> = vec![Inherited::default(); n];
+        let mut matched: Vec<Option<usize>> = vec![None; n];
         let lengths =
             (0..starts.len()).map(|g| starts.get(g + 1).copied().unwrap_or(n) - starts[g]);
         let (mut pieces, _) = crate::slices::split_lengths(&mut matched, lengths);
@@ -147,19 +142,7 @@ impl ContactSet {
                     }
                     let new = first..first + out.len();
                     let (points, locals) = (&raw[new.clone()], &locals[new]);
-                    let old = p0..p;
-                    match_pair(
-                        points,
-                        locals,
-                        out,
-                        old.clone(),
-                        bodies,
-                        previous,
-                        match_fraction,
-                    );
-                    if keep_pair_impulse {
-                        share_untaken(points, out, old, previous);
-                    }
+                    match_pair(points, locals, out, p0..p, bodies, previous, match_fraction);
                 }
             });
         (
@@ -178,13 +161,15 @@ impl ContactSet {
             .for_each(|(k, (b1, b2, point, frame, gap, mu, impulse, status))| {
                 let c = &raw[k];
                 let (t, s) = frame_from_normal(c.normal);
-                let Inherited { from, share } = matched[k];
-                let r = from.map_or(DVec3::ZERO, |j| oriented_impulse(previous, j, c)) + share;
-                *impulse = DVec3::new(r.dot(c.normal), r.dot(t), r.dot(s));
-                *status = match from {
-                    Some(j) => previous.status[j],
-                    None if impulse.x > 0.0 => ContactStatus::Stick,
-                    None => ContactStatus::NoContact,
+                (*impulse, *status) = match matched[k] {
+                    Some(j) => {
+                        let r = previous.world_impulse(j);
+                        (
+                            DVec3::new(r.dot(c.normal), r.dot(t), r.dot(s)),
+                            previous.status[j],
+                        )
+                    }
+                    None => (DVec3::ZERO, ContactStatus::NoContact),
                 };
                 (*b1, *b2, *point, *gap) = (c.body1, c.body2, c.point, c.gap);
                 *frame = [c.normal, t, s];
@@ -207,24 +192,6 @@ fn local_point(bodies: &BodySet, c: &RawContact) -> DVec3 {
     bodies.orientation[b1].inverse() * (c.point - bodies.position[b1])
 }
 
-/// What a new contact starts from: the old contact it takes over, and a share (world impulse on
-/// the new contact's body 2) of what the pair's untaken old contacts carried.
-#[derive(Clone, Copy, Debug, Default)]
-struct Inherited {
-    from: Option<usize>,
-    share: DVec3,
-}
-
-/// World impulse of old contact `j` on the body 2 of new point `c` (same pair, either order).
-fn oriented_impulse(previous: &ContactSet, j: usize, c: &RawContact) -> DVec3 {
-    let r = previous.world_impulse(j);
-    if previous.body1[j] == c.body1 {
-        r
-    } else {
-        -r
-    }
-}
-
 /// The old contacts that the detected `points` of one pair (`locals`: in body 1's frame) take
 /// over, into `out`: in order, each point takes the nearest old contact of the same pair (the
 /// range `old` of `previous`; same body 1) within the match distance that an earlier point has
@@ -232,15 +199,15 @@ fn oriented_impulse(previous: &ContactSet, j: usize, c: &RawContact) -> DVec3 {
 fn match_pair(
     points: &[RawContact],
     locals: &[DVec3],
-    out: &mut [Inherited],
+    out: &mut [Option<usize>],
     old: std::ops::Range<usize>,
     bodies: &BodySet,
     previous: &ContactSet,
     match_fraction: f64,
 ) {
     let (p0, p1) = (old.start, old.end);
-    out.fill(Inherited::default());
     if p0 == p1 {
+        out.fill(None);
         return;
     }
     let (mut small, mut large) = ([false; 16], Vec::new());
@@ -252,7 +219,7 @@ fn match_pair(
     };
     let (b1, b2) = (points[0].body1 as usize, points[0].body2 as usize);
     let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
-    for ((c, &local), taken) in points.iter().zip(locals).zip(out.iter_mut()) {
+    for ((c, &local), taken) in points.iter().zip(locals).zip(out) {
         let mut best: Option<(f64, usize)> = None;
         for (u, &was_used) in used.iter().enumerate() {
             let j = p0 + u;
@@ -264,35 +231,9 @@ fn match_pair(
                 best = Some((d, j));
             }
         }
-        taken.from = best.map(|(_, j)| j);
-        if let Some(j) = taken.from {
+        *taken = best.map(|(_, j)| j);
+        if let Some(j) = *taken {
             used[j - p0] = true;
-        }
-    }
-}
-
-/// Passes the impulse of the old contacts of a pair (`old`) that no detected point took over
-/// (a manifold whose points moved over a face, or that changed between a face and an edge
-/// pair) to the pair's overlapping `points`, in proportion to their overlaps (as a linear
-/// spring's force to its deflection): the pair keeps its total impulse. For a compliant
-/// contact the impulse is the spring's state: a point restarting from zero force under a
-/// loaded body lets the bodies approach by the load over the stiffness in one step, step after
-/// step while the points keep changing.
-fn share_untaken(
-    points: &[RawContact],
-    out: &mut [Inherited],
-    old: std::ops::Range<usize>,
-    previous: &ContactSet,
-) {
-    let c0 = &points[0];
-    let left: DVec3 = old
-        .filter(|&j| !out.iter().any(|t| t.from == Some(j)))
-        .map(|j| oriented_impulse(previous, j, c0))
-        .sum();
-    let depth: f64 = points.iter().map(|c| (-c.gap).max(0.0)).sum();
-    if left != DVec3::ZERO && depth > 0.0 {
-        for (c, taken) in points.iter().zip(out.iter_mut()) {
-            taken.share = left * ((-c.gap).max(0.0) / depth);
         }
     }
 }
@@ -314,74 +255,5 @@ fn radius(bodies: &BodySet, i: usize) -> f64 {
     match &bodies.shape[i] {
         Shape::Polyhedron(p) => p.radius,
         Shape::Plane { .. } => f64::INFINITY,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::bodies::BodyKind;
-    use crate::shapes::ConvexPolyhedron;
-
-    /// A cube resting on a plane: body 0 the plane, body 1 the cube.
-    fn plane_and_cube() -> BodySet {
-        let mut bodies = BodySet::default();
-        bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
-        let mut cube = ConvexPolyhedron::cuboid(DVec3::splat(0.05)).unwrap();
-        cube.position = DVec3::new(0.0, 0.0, 0.05);
-        bodies.add_polyhedron(cube, 2700.0, BodyKind::Dynamic, 1);
-        bodies
-    }
-
-    fn raw(x: f64, y: f64, gap: f64) -> RawContact {
-        RawContact {
-            body1: 0,
-            body2: 1,
-            point: DVec3::new(x, y, 0.0),
-            normal: DVec3::Z,
-            gap,
-        }
-    }
-
-    /// Four loaded corners replaced by points far from them (beyond the match distance): with
-    /// the pair's impulse kept, the overlapping points share the total in proportion to their
-    /// overlaps (the one apart gets nothing); without, the new points start from zero.
-    #[test]
-    fn a_pair_keeps_its_impulse_when_its_points_change() {
-        let bodies = plane_and_cube();
-        let friction = FrictionTable::new(0.5);
-        let corners: Vec<RawContact> = [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)]
-            .iter()
-            .map(|&(x, y)| raw(0.05 * x, 0.05 * y, -1e-5))
-            .collect();
-        let mut old = ContactSet::default();
-        old.rebuild(
-            &corners,
-            &bodies,
-            &friction,
-            &ContactSet::default(),
-            0.1,
-            true,
-        );
-        for (k, r) in old.impulse.iter_mut().enumerate() {
-            *r = DVec3::new(1.0 + k as f64, 0.1, -0.2);
-        }
-        // Two new points on the x = ±0.03 lines, one overlapping, one apart.
-        let new = [
-            raw(-0.03, 0.0, -2e-5),
-            raw(0.03, 0.0, -1e-5),
-            raw(0.0, 0.2, 1e-4),
-        ];
-        let mut set = ContactSet::default();
-        set.rebuild(&new, &bodies, &friction, &old, 0.1, true);
-        let total = |s: &ContactSet| (0..s.len()).map(|k| s.world_impulse(k)).sum::<DVec3>();
-        assert!((total(&set) - total(&old)).length() < 1e-12);
-        // 10 N·s in all, overlaps 2:1.
-        assert!((set.impulse[0].x - 20.0 / 3.0).abs() < 1e-12);
-        assert!((set.impulse[1].x - 10.0 / 3.0).abs() < 1e-12);
-        assert_eq!(set.impulse[2], DVec3::ZERO);
-        assert_eq!(set.status[0], ContactStatus::Stick);
-        set.rebuild(&new, &bodies, &friction, &old, 0.1, false);
-        assert!(set.impulse.iter().all(|&r| r == DVec3::ZERO));
     }
 }
