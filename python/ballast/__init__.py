@@ -253,14 +253,15 @@ class Simulation:
         stiffness, on the tangential diagonal of ``W``; 0 without); ``compliances`` ``(n, 2)``
         holds each contact's normal and tangential compliance as in ``W`` (the two above, or
         less for a loaded contact under ``max_closure``'s hyperbolic law, linearised at the
-        force it carried).
+        force it carried; with ``normal_law = "overlap"``, at the force its overlap holds).
 
         Its global form (FCLIB's ``fclib_global``, Siconos' ``GlobalFrictionContactProblem``)
         over the ``bodies`` the contacts move (world indices, 6 velocities each: linear then
         angular): ``v = v_free + M_inv H r``, ``u = H.T v + b``, so ``W = H.T M_inv H`` (plus
         ``compliances`` on the diagonal: normal, then tangential twice, per contact)
         and ``q = H.T v_free + b`` (``b``: the driven and fixed bodies' motion, the gap shift
-        and minus the compliances times the previous step's impulses).
+        and minus the compliances times the previous step's impulses, or with
+        ``normal_law = "overlap"`` the impulses the contacts' overlaps hold).
         ``H`` ``(6 nb, 3 n)``, ``M`` (masses, world inertia tensors) and ``M_inv`` (the
         solver's: zero on a degree of freedom a drive imposes) are scipy sparse matrices,
         ``v_free`` ``(6 nb,)``; their parts ``H_blocks``, ``H_body``, ``H_contact``, ``mass``,

@@ -464,6 +464,28 @@ def test_closure_law_compliances_are_those_in_w(tmp_path):
     assert np.abs(W - W2).max() <= 1e-12 * np.abs(W2).max()
 
 
+def test_overlap_law_starts_from_the_force_the_overlap_holds(tmp_path):
+    # With `normal_law = "overlap"` an overlapping contact's spring starts the step from the
+    # force k δ its overlap δ holds: b's normal part is −c k h δ = −δ/h whatever k (the
+    # example's overlaps are under the 1 mm cap, the recovery acts beyond F/k only), and an
+    # open contact's is its gap shift g/(hθ).
+    text = open(os.path.join(ROOT, "examples", "pile.toml")).read()
+    text = text.replace("[simulation]\n", '[simulation]\nnormal_law = "overlap"\n', 1)
+    path = tmp_path / "pile.toml"
+    path.write_text(text)
+    sim = ballast.Simulation.from_toml(str(path))
+    sim.step(3000)
+    p = sim.contact_problem()
+    gap = sim.contacts["gap"]
+    assert len(gap) == len(p["mu"])
+    bn = p["b"][:, 0]
+    over, open_ = gap < 0, gap > 0
+    assert over.sum() > 50 and open_.sum() > 50 and np.all(-gap[over] < 1e-3)
+    h = sim.dt
+    assert np.allclose(bn[over], gap[over] / h, rtol=1e-9, atol=0)
+    assert np.allclose(bn[open_], gap[open_] / (h * 0.5), rtol=1e-9, atol=0)
+
+
 def test_global_form_of_the_contact_problem():
     # A settling pile: grains against each other and against the box's fixed walls.
     sim = ballast.Simulation.from_toml(os.path.join(ROOT, "examples", "pile.toml"))

@@ -14,7 +14,7 @@
 use crate::bodies::{BodyKind, BodySet};
 use crate::contacts::ContactSet;
 use crate::detection::{Detector, RawContact};
-use crate::laws::{Elastic, FrictionTable};
+use crate::laws::{default_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::build_local_problems;
@@ -67,6 +67,15 @@ pub struct StepSettings {
     /// Only with [`Self::contact_stiffness`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_closure: Option<f64>,
+    /// Where a compliant contact's normal force starts each step from: the force it carried
+    /// (the rate form, the default) or the force its measured overlap holds (see
+    /// [`NormalLaw`]). Only with [`Self::contact_stiffness`].
+    #[serde(default, skip_serializing_if = "NormalLaw::is_rate")]
+    pub normal_law: NormalLaw,
+    /// With [`NormalLaw::Overlap`]: the deepest overlap (m) whose elastic force a step starts
+    /// from (below `max_closure`); `None`: [`default_overlap_cap`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overlap_cap: Option<f64>,
     /// Overlap recovery of the compliant law, β ∈ [0, 1]: the fraction of a contact's overlap
     /// in excess of its elastic deflection `F/k` (beyond [`Self::overlap_slop`]) that the law
     /// asks the contact to remove within a step (a separation speed `β excess / h` added to
@@ -158,6 +167,8 @@ impl Default for StepSettings {
             contact_stiffness: None,
             tangential_stiffness: None,
             max_closure: None,
+            normal_law: NormalLaw::Rate,
+            overlap_cap: None,
             overlap_recovery: default_overlap_recovery(),
             overlap_slop: default_overlap_slop(),
             solver: SolverSettings::default(),
@@ -179,6 +190,41 @@ pub fn default_overlap_recovery() -> f64 {
 /// in a trusted run; below it the rate form alone decides.
 pub fn default_overlap_slop() -> f64 {
     2.5e-4
+}
+
+/// Checks a scenario's `simulation.normal_law` and `simulation.overlap_cap` (m): the overlap
+/// law needs compliant contacts; the cap is a number > 0, below `max_closure` (as written).
+pub fn check_normal_law(
+    law: NormalLaw,
+    cap: Option<f64>,
+    normal: Option<f64>,
+    max_closure: Option<f64>,
+) -> Result<(), String> {
+    let compliant = check_contact_stiffness(normal).unwrap_or(None).is_some();
+    if law == NormalLaw::Overlap && !compliant {
+        return Err(
+            "simulation.normal_law = \"overlap\" needs compliant contacts: set \
+                    simulation.contact_stiffness (> 0 N/m) too"
+                .to_string(),
+        );
+    }
+    if let Some(c) = cap {
+        let vm = check_max_closure(max_closure, normal).unwrap_or(None);
+        if !(c.is_finite() && c > 0.0 && vm.is_none_or(|vm| c < vm)) {
+            return Err(format!(
+                "simulation.overlap_cap = {c} must be > 0 m{}",
+                vm.map_or(String::new(), |vm| format!(
+                    " and below max_closure = {vm} m"
+                ))
+            ));
+        }
+        if law != NormalLaw::Overlap {
+            return Err(format!(
+                "simulation.overlap_cap = {c} needs simulation.normal_law = \"overlap\""
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Checks a scenario's `simulation.overlap_recovery` (β ∈ [0, 1]) and `simulation.overlap_slop`
@@ -399,6 +445,20 @@ impl World {
             d.balance,
             &weights,
         )
+    }
+
+    /// The elastic law and the overlap cap with [`NormalLaw::Overlap`] on compliant contacts
+    /// (see [`build_local_problems`]); `None` for the rate form and for rigid contacts.
+    fn overlap_law(&self) -> Option<(Elastic, f64)> {
+        let s = &self.settings;
+        match (s.normal_law, s.contact_stiffness) {
+            (NormalLaw::Overlap, Some(_)) => Some((
+                self.nlgs().elastic(),
+                s.overlap_cap
+                    .unwrap_or_else(|| default_overlap_cap(s.max_closure)),
+            )),
+            _ => None,
+        }
     }
 
     /// The NLGS solver configured for this world.
@@ -622,6 +682,7 @@ impl World {
             b,
             &self.scratch.solver_bodies,
             &self.scratch.attach,
+            self.overlap_law(),
             &mut self.scratch.locals,
         );
         times.nlgs += lap.lap();

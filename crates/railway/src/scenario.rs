@@ -9,6 +9,8 @@
 //! contact_stiffness = 1e7 # N/m per contact point (default: rigid contacts)
 //! tangential_stiffness = 1e7 # N/m, sticking contacts' spring (default: rigid sticking)
 //! max_closure = 7.5e-4  # m, hyperbolic closure: deflection F Vm/(k Vm + F) (default: F/k)
+//! normal_law = "overlap" # compliant contacts: force from the measured overlap (default "rate": the force carried)
+//! overlap_cap = 6e-4    # m, with normal_law = "overlap": deepest overlap a step's force starts from (default 0.8 max_closure, else 1 mm)
 //! overlap_recovery = 0.2  # compliant contacts: fraction of the overlap beyond F/k removed per step (engine default: 0)
 //! overlap_slop = 2.5e-4   # m, excess overlap the recovery tolerates
 //! output_interval = 25  # steps between rows of series.csv
@@ -47,6 +49,7 @@ use crate::preparation::{
 use crate::scene::{build_bodies, Blocks, Layout, TrackFriction};
 use crate::tamping::{Cycle, TampingSpec};
 use crate::track::TrackSpec;
+use ballast_engine::laws::NormalLaw;
 use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, DdmSettings, SolverSettings};
 use ballast_engine::world::{StepSettings, World};
 use serde::{Deserialize, Serialize};
@@ -76,6 +79,14 @@ pub struct TrackSimulation {
     /// the linear law (see `ballast_engine::world::StepSettings::max_closure`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_closure: Option<f64>,
+    /// Where a compliant contact's force starts each step from (see
+    /// `ballast_engine::laws::NormalLaw`): `"rate"` (the force it carried) or `"overlap"`.
+    #[serde(skip_serializing_if = "NormalLaw::is_rate")]
+    pub normal_law: NormalLaw,
+    /// With `normal_law = "overlap"`: the deepest overlap (m) whose force a step starts from;
+    /// `None`: `ballast_engine::laws::default_overlap_cap`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub overlap_cap: Option<f64>,
     /// Overlap recovery β ∈ [0, 1] of the compliant law (see
     /// `ballast_engine::world::StepSettings::overlap_recovery`).
     pub overlap_recovery: f64,
@@ -107,6 +118,8 @@ impl Default for TrackSimulation {
             contact_stiffness: None,
             tangential_stiffness: None,
             max_closure: None,
+            normal_law: NormalLaw::Rate,
+            overlap_cap: None,
             // Tines wedge grains against the block: there the rate form's overlaps drift by
             // millimetres without it (BENCHMARKS.md, the overlap recovery).
             overlap_recovery: 0.2,
@@ -481,6 +494,14 @@ impl TrackScenario {
         {
             return Err(ballast_engine::ScenarioError(e).into());
         }
+        if let Err(e) = ballast_engine::world::check_normal_law(
+            s.normal_law,
+            s.overlap_cap,
+            s.contact_stiffness,
+            s.max_closure,
+        ) {
+            return Err(ballast_engine::ScenarioError(e).into());
+        }
         check_range(
             "simulation.overlap_recovery",
             s.overlap_recovery,
@@ -589,6 +610,8 @@ impl TrackScenario {
                 self.simulation.contact_stiffness,
             )
             .unwrap_or(None),
+            normal_law: self.simulation.normal_law,
+            overlap_cap: self.simulation.overlap_cap,
             // Inert for rigid contacts: kept at the engine's default there, so that a rigid
             // run's checkpoints do not depend on it.
             overlap_recovery: if stiffness.is_some() {

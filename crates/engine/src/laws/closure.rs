@@ -22,6 +22,47 @@
 //! stiffness is scaled by the same factor (a stiffer contact is stiffer in both directions,
 //! as Mindlin's is with Hertz's).
 
+/// Where a compliant contact's normal force starts each step from.
+///
+/// Over a step the law adds `k_α` times the approach `−h uₙ` to a starting force `F₀`:
+///
+/// - [`NormalLaw::Rate`]: `F₀` is the force the same contact point carried at the end of the
+///   previous step (the rate form; a new point starts from 0). Nothing ties the overlap to
+///   that force, and where manifold points churn or a polyhedral depth jumps the overlap
+///   drifts away from the deflection the force implies.
+/// - [`NormalLaw::Overlap`]: `F₀ = F(min(δ, δ_cap))`, the force the overlap `δ` measured at
+///   the start of the step holds elastically (`F(δ) = k δ/(1 − δ/V_m)`, or `k δ`), whatever
+///   the point carried before: the force follows the geometry (a spring on the overlap,
+///   integrated by backward Euler: `F₁ = F(δ − h uₙ)`). `δ_cap` bounds the force a step
+///   starts from: a polyhedral depth that jumps deep (the closest features change) is not
+///   turned into a force near the hyperbola's asymptote; the overlap beyond it is left to the
+///   overlap recovery and the position correction, as the rate form's drift is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NormalLaw {
+    /// The rate form: the force the contact point carried.
+    #[default]
+    Rate,
+    /// The force the measured overlap holds (up to the cap).
+    Overlap,
+}
+
+impl NormalLaw {
+    /// Whether this is the rate form (the default, left out of serialised settings).
+    pub fn is_rate(&self) -> bool {
+        *self == Self::Rate
+    }
+}
+
+/// The default overlap cap `δ_cap` of [`NormalLaw::Overlap`] (m): 0.8 `V_m` with the closure
+/// law (a starting force of `4 k V_m`, where the tangent stiffness is 25 `k`), 1 mm (the
+/// overlap a trusted run stays under) with the linear law. On the soft tamping cycle a cap
+/// of 0.6 `V_m` let a tine's contact ratchet deep (each step restarting below the load it
+/// carries), one of 0.95 `V_m` stalled Gauss-Seidel on stiff springs (BENCHMARKS.md).
+pub fn default_overlap_cap(max_closure: Option<f64>) -> f64 {
+    max_closure.map_or(1e-3, |vm| 0.8 * vm)
+}
+
 /// A contact point's elastic deflection as a function of the normal impulse `r̄ₙ` it carried
 /// over the previous step (the force times `h`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -57,6 +98,23 @@ impl Elastic {
     #[inline(always)]
     pub fn secant(&self, r0: f64, r1: f64) -> f64 {
         self.stiffening(r0) * self.stiffening(r1)
+    }
+
+    /// The normal impulse whose elastic deflection is `delta` (m): the inverse of
+    /// [`Self::deflection`] (`∞` at and beyond the hyperbola's `V_m`; 0 for `delta ≤ 0`).
+    #[inline(always)]
+    pub fn impulse_at(&self, delta: f64) -> f64 {
+        let d = delta.max(0.0);
+        if self.closure_impulse > 0.0 {
+            let left = self.per_impulse - d / self.closure_impulse;
+            if left > 0.0 {
+                d / left
+            } else {
+                f64::INFINITY
+            }
+        } else {
+            d / self.per_impulse
+        }
     }
 
     /// The elastic deflection (m) under the normal impulse `r̄ₙ` (negative impulses: 0).
@@ -110,6 +168,43 @@ mod tests {
             let secant = (f1 - f0) / (k * e.secant(f0 * h, f1 * h));
             prop_assert!((exact - secant).abs() <= 1e-9 * vm, "{exact} vs {secant}");
         }
+    }
+
+    proptest! {
+        /// `impulse_at` inverts `deflection`, linear and hyperbolic: the force the overlap
+        /// law starts from deflects the contact by its overlap.
+        #[test]
+        fn impulse_at_inverts_the_deflection(
+            k in 1e4f64..1e9,
+            h in 1e-5f64..1e-3,
+            vm in 1e-5f64..1e-2,
+            f in 0.0f64..1e5,
+            linear in proptest::bool::ANY,
+        ) {
+            let e = Elastic {
+                per_impulse: 1.0 / (k * h),
+                closure_impulse: if linear { 0.0 } else { k * h * vm },
+            };
+            let r = f * h;
+            let back = e.impulse_at(e.deflection(r));
+            prop_assert!((back - r).abs() <= 1e-9 * (r + k * h * vm), "{back} vs {r}");
+        }
+    }
+
+    /// Beyond the hyperbola's asymptote no force holds the overlap; none holds a gap.
+    #[test]
+    fn impulse_at_the_asymptote_is_infinite() {
+        let (k, h, vm) = (1e6, 1e-4, 1e-3);
+        let e = Elastic {
+            per_impulse: 1.0 / (k * h),
+            closure_impulse: k * h * vm,
+        };
+        assert_eq!(e.impulse_at(vm), f64::INFINITY);
+        assert_eq!(e.impulse_at(2.0 * vm), f64::INFINITY);
+        assert_eq!(e.impulse_at(-1e-3), 0.0);
+        // The default cap, 0.8 V_m, holds 4 k V_m.
+        let f = e.impulse_at(default_overlap_cap(Some(vm))) / h;
+        assert!((f - 4.0 * k * vm).abs() <= 1e-9 * f, "{f}");
     }
 
     /// The linear law: `F/k`, stiffening 1; rigid contacts: no deflection.

@@ -120,6 +120,13 @@ pub struct Simulation {
     /// the linear law (see `StepSettings::max_closure`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_closure: Option<f64>,
+    /// Where a compliant contact's force starts each step from: `"rate"` (default) or
+    /// `"overlap"` (see `StepSettings::normal_law`).
+    #[serde(default, skip_serializing_if = "crate::laws::NormalLaw::is_rate")]
+    pub normal_law: crate::laws::NormalLaw,
+    /// With `normal_law = "overlap"`: the overlap cap (m; see `StepSettings::overlap_cap`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overlap_cap: Option<f64>,
     /// Overlap recovery β ∈ [0, 1] of the compliant law (see `StepSettings::overlap_recovery`).
     #[serde(default = "crate::world::default_overlap_recovery")]
     pub overlap_recovery: f64,
@@ -562,6 +569,13 @@ impl Scenario {
             .map_err(ScenarioError)?;
         crate::world::check_max_closure(s.max_closure, s.contact_stiffness)
             .map_err(ScenarioError)?;
+        crate::world::check_normal_law(
+            s.normal_law,
+            s.overlap_cap,
+            s.contact_stiffness,
+            s.max_closure,
+        )
+        .map_err(ScenarioError)?;
         crate::world::check_overlap_recovery(s.overlap_recovery, s.overlap_slop)
             .map_err(ScenarioError)?;
         if s.output_interval == 0 {
@@ -897,6 +911,8 @@ impl Scenario {
             .unwrap_or(None),
             max_closure: crate::world::check_max_closure(s.max_closure, s.contact_stiffness)
                 .unwrap_or(None),
+            normal_law: s.normal_law,
+            overlap_cap: s.overlap_cap,
             overlap_recovery: s.overlap_recovery,
             overlap_slop: s.overlap_slop,
             solver: self.solver.clone(),

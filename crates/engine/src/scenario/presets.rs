@@ -42,6 +42,8 @@ pub fn pile(grains: usize, diameter: [f64; 2], seed: u64, steps: u64) -> Scenari
             contact_stiffness: None,
             tangential_stiffness: None,
             max_closure: None,
+            normal_law: Default::default(),
+            overlap_cap: None,
             overlap_recovery: crate::world::default_overlap_recovery(),
             overlap_slop: crate::world::default_overlap_slop(),
             output_interval: 50,

@@ -7,6 +7,7 @@
 
 use crate::bodies::BodySet;
 use crate::contacts::ContactSet;
+use crate::laws::Elastic;
 use crate::math::{skew, DMat3, DVec3, Sym3};
 
 /// What the solver knows of a body: current velocities and inverse mass properties (zero for
@@ -183,7 +184,10 @@ pub(crate) fn delassus_block(
 }
 
 /// Builds the local problem of every contact (in parallel; the order is the contacts' order),
-/// starting from the contacts' impulses with `warm_start`, else from zero. `attach[i]` is the
+/// starting from the contacts' impulses with `warm_start`, else from zero. `overlap_law`: the
+/// elastic law and the overlap cap of [`crate::laws::NormalLaw::Overlap`] (the compliant law
+/// starts from the force the capped overlap holds), `None` for the rate form (from the force
+/// the contact carried). `attach[i]` is the
 /// body whose velocities body `i` takes (itself, or the body it is a rigid part of; empty:
 /// every body is itself): a contact on an attached part acts on that body, with the lever arm
 /// from its centre of mass.
@@ -193,6 +197,7 @@ pub(crate) fn build_local_problems(
     bodies: &BodySet,
     solver_bodies: &[SolverBody],
     attach: &[u32],
+    overlap_law: Option<(Elastic, f64)>,
     out: &mut Vec<LocalProblem>,
 ) {
     use rayon::prelude::*;
@@ -233,7 +238,11 @@ pub(crate) fn build_local_problems(
                 } else {
                     DVec3::ZERO
                 },
-                r_prev: contacts.impulse[k].x,
+                // The compliant law's starting force: remembered, or held by the overlap.
+                r_prev: match overlap_law {
+                    Some((e, cap)) => e.impulse_at((-contacts.gap[k]).min(cap)),
+                    None => contacts.impulse[k].x,
+                },
                 rt_prev: [contacts.impulse[k].y as f32, contacts.impulse[k].z as f32],
                 seen: [u16::MAX; 2],
             }

@@ -44,6 +44,10 @@
 //! to separate at `(β/h) max(0, δ − r̄ₙ/(k h) − slop)` on top of the law, a Baumgarte-type
 //! stabilisation of the drift alone: a contact whose overlap is its elastic deflection is not
 //! touched, and the speed is part of `q` (and of the residual's scale).
+//!
+//! With [`crate::laws::NormalLaw::Overlap`] `r̄ₙ` is not remembered but read from the
+//! geometry: the impulse the overlap at the start of the step holds elastically (capped),
+//! so the same local problem is a spring on the measured overlap.
 
 //!
 //! # Skipping still contacts
