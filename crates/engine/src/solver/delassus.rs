@@ -48,8 +48,9 @@ pub struct LocalProblem {
     pub mu: f64,
     /// Current impulse `(r_n, r_t, r_s)`.
     pub r: DVec3,
-    /// Normal impulse the contact carried at the end of the previous step (0 for a new
-    /// contact): the memory of the compliant normal law (see [`super::Nlgs`]).
+    /// Normal impulse the compliant normal law starts the step from (see [`super::Nlgs`]): the
+    /// one the contact carried at the end of the previous step (0 for a new contact), or with
+    /// [`crate::laws::NormalLaw::Overlap`] the one its overlap holds.
     pub r_prev: f64,
     /// Tangential impulse `(r_t, r_s)` at the end of the previous step, re-projected on this
     /// step's frame: the memory of the tangential spring (single precision: it only shifts
@@ -184,13 +185,12 @@ pub(crate) fn delassus_block(
 }
 
 /// Builds the local problem of every contact (in parallel; the order is the contacts' order),
-/// starting from the contacts' impulses with `warm_start`, else from zero. `overlap_law`: the
-/// elastic law and the overlap cap of [`crate::laws::NormalLaw::Overlap`] (the compliant law
-/// starts from the force the capped overlap holds), `None` for the rate form (from the force
-/// the contact carried). `attach[i]` is the
+/// starting from the contacts' impulses with `warm_start`, else from zero. `attach[i]` is the
 /// body whose velocities body `i` takes (itself, or the body it is a rigid part of; empty:
 /// every body is itself): a contact on an attached part acts on that body, with the lever arm
-/// from its centre of mass.
+/// from its centre of mass. `overlap_law`: the elastic law and the overlap cap of
+/// [`crate::laws::NormalLaw::Overlap`] (the compliant law starts from the force the capped
+/// overlap holds); `None` for the rate form (from the force the contact carried).
 pub(crate) fn build_local_problems(
     contacts: &ContactSet,
     warm_start: bool,
