@@ -19,3 +19,12 @@ pub(crate) fn default_ddm() -> DdmSettings {
         ..DdmSettings::default()
     }
 }
+
+/// Normal and tangential stiffness of a contact point in track runs (N/m). Soft enough for
+/// NLGS to converge on the tamping cycle (stiffer springs: more sweeps per step); the
+/// hyperbolic closure ([`DEFAULT_MAX_CLOSURE`]) bounds what the softness costs in overlap.
+pub(crate) const DEFAULT_STIFFNESS: f64 = 2.5e5;
+
+/// Maximum closure of a contact point in track runs (m): no spring deflects more than 0.75 mm,
+/// 3 % of the smallest grain of the default grading, whatever it carries.
+pub(crate) const DEFAULT_MAX_CLOSURE: f64 = 7.5e-4;
