@@ -834,8 +834,10 @@ mod tests {
     /// compliant setting written beside it is refused, by name.
     #[test]
     fn rigid_contacts_switch_the_compliant_defaults_off() {
+        let preset = TrackScenario::default_preset();
+        assert_eq!(TrackScenario::from_toml(&preset.to_toml()).unwrap(), preset);
         let d = TrackScenario::from_toml("[track]\n").unwrap().simulation;
-        assert_eq!(d, TrackScenario::default_preset().simulation);
+        assert_eq!(d, preset.simulation);
         assert_eq!(
             (d.contact_stiffness, d.tangential_stiffness, d.max_closure),
             (Some(2.5e5), Some(2.5e5), Some(7.5e-4))
