@@ -115,11 +115,11 @@ fn inf_if_none<S: serde::Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::
 }
 
 impl TrackSimulation {
-    /// Rigid contacts (`contact_stiffness = inf`) in a file that sets no other setting of the
-    /// compliant law: the preset's tangential spring, closure and normal law go with its
-    /// stiffness, so they are switched off rather than refused. `given`: the `[simulation]`
-    /// keys the file sets.
-    fn rigid_unless_given(&mut self, given: Option<&toml::Table>) {
+    /// Reads `inf` stiffnesses and closure as absent, then, for rigid contacts
+    /// (`contact_stiffness = inf`) in a file that sets no other setting of the compliant law,
+    /// switches the preset's tangential spring, closure and normal law off with its stiffness
+    /// rather than refusing them. `given`: the `[simulation]` keys the file sets.
+    fn normalise_compliant_law(&mut self, given: Option<&toml::Table>) {
         // `inf` is written for an absent setting (see `inf_if_none`): the same, absent.
         for v in [
             &mut self.contact_stiffness,
@@ -130,9 +130,7 @@ impl TrackSimulation {
                 *v = None;
             }
         }
-        let rigid = ballast_engine::world::check_contact_stiffness(self.contact_stiffness)
-            .is_ok_and(|k| k.is_none());
-        if !rigid {
+        if self.contact_stiffness.is_some() {
             return;
         }
         let given = |key: &str| given.is_some_and(|t| t.contains_key(key));
@@ -418,7 +416,7 @@ impl TrackScenario {
         let mut f: TrackFile = merged
             .try_into()
             .map_err(|e: toml::de::Error| Error::Toml(e.to_string()))?;
-        f.simulation.rigid_unless_given(given.as_ref());
+        f.simulation.normalise_compliant_law(given.as_ref());
         let mut grains = GrainSpec::default();
         let mut seed = BallastSpec::default().seed;
         if let Some(b) = f.ballast {
