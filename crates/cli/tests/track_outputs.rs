@@ -39,6 +39,8 @@ mod figures;
 const SCENARIO: &str = r#"
 [simulation]
 dt = 4e-4
+contact_stiffness = 2.5e5
+tangential_stiffness = 2.5e5
 output_interval = 1
 vtk_interval = 0
 checkpoint_interval = 200

@@ -2,21 +2,21 @@
 //!
 //! ```toml
 //! [simulation]          # all optional
-//! dt = 2e-4             # s
+//! dt = 1e-4             # s (the paper preset: 2e-4)
 //! theta = 0.6           # θ-scheme weight
-//! steps = 8820          # default: the whole cycle, tamping.duration / dt
+//! steps = 17640         # default: the whole cycle, tamping.duration / dt
 //! alert = 4e-4          # m
 //! reuse_distance = 1e-5 # m, contact geometry reused until a grain moved this far (0 = never)
-//! contact_stiffness = 2.5e5 # N/m per contact point (inf: rigid contacts, the paper preset)
-//! tangential_stiffness = 2.5e5 # N/m, sticking contacts' spring (inf: rigid sticking)
+//! contact_stiffness = 1e6 # N/m per contact point (inf: rigid contacts, the paper preset)
+//! tangential_stiffness = 1e6 # N/m, sticking contacts' spring (inf: rigid sticking)
 //! max_closure = 7.5e-4  # m, hyperbolic closure: deflection F Vm/(k Vm + F) (inf: F/k)
 //! normal_law = "overlap" # force from the measured overlap ("rate": the force carried)
 //! overlap_cap = 6e-4    # m, deepest overlap a step's force starts from (default 0.8 max_closure, else 1 mm)
 //! overlap_recovery = 0.2  # compliant contacts: fraction of the overlap beyond F/k removed per step (engine default: 0)
 //! overlap_slop = 2.5e-4   # m, excess overlap the recovery tolerates
-//! output_interval = 100 # steps between rows of series.csv
-//! vtk_interval = 500    # steps between ParaView frames (0 = none)
-//! checkpoint_interval = 2000
+//! output_interval = 200 # steps between rows of series.csv
+//! vtk_interval = 1000   # steps between ParaView frames (0 = none)
+//! checkpoint_interval = 4000
 //!
 //! [track]               # see TrackSpec
 //! blocks = 1
@@ -39,7 +39,9 @@
 //! [ddm]
 //! ```
 
-use crate::defaults::{default_ddm, DEFAULT_ALERT, DEFAULT_MAX_CLOSURE, DEFAULT_STIFFNESS};
+use crate::defaults::{
+    default_ddm, DEFAULT_ALERT, DEFAULT_DT, DEFAULT_MAX_CLOSURE, DEFAULT_STIFFNESS,
+};
 use crate::error::{check_range, refuse, Error, FieldError};
 use crate::grading::{GradingCurve, GradingTable};
 use crate::grains::GrainSpec;
@@ -148,11 +150,11 @@ impl TrackSimulation {
 
 impl Default for TrackSimulation {
     fn default() -> Self {
-        // Soft elastic contacts whose force follows the measured overlap: with rigid
-        // contacts NLGS missed its tolerance on nearly every step of the default cycle, with
-        // these it misses it on 0.4 % of them (BENCHMARKS.md, the overlap law).
+        // Elastic contacts whose force follows the measured overlap: with rigid contacts
+        // NLGS missed its tolerance on nearly every step of the default cycle, with these it
+        // misses it on 0.12 % of them (BENCHMARKS.md, the overlap law and the 1e-4 s step).
         TrackSimulation {
-            dt: 2e-4,
+            dt: DEFAULT_DT,
             theta: 0.6,
             alert: DEFAULT_ALERT,
             reuse_distance: ballast_engine::world::default_reuse_distance(),
@@ -167,9 +169,9 @@ impl Default for TrackSimulation {
             overlap_slop: ballast_engine::world::default_overlap_slop(),
             steps: None,
             // Every 20 ms and 0.1 s of the default cycle.
-            output_interval: 100,
-            vtk_interval: 500,
-            checkpoint_interval: 2000,
+            output_interval: 200,
+            vtk_interval: 1000,
+            checkpoint_interval: 4000,
             max_speed: None,
             max_overlap: None,
         }
@@ -311,8 +313,8 @@ pub fn is_track_scenario(text: &str) -> bool {
 
 impl TrackScenario {
     /// The default job: one block and its 4 tines through the paper's cycle (T = 1.764 s,
-    /// dt = 2e-4 s as in the paper, 8,820 steps: 143 steps per period of the 35 Hz
-    /// vibration), preparation included, with soft elastic contacts whose force follows the
+    /// dt = 1e-4 s, half the paper's, 17,640 steps: 286 steps per period of the 35 Hz
+    /// vibration), preparation included, with elastic contacts whose force follows the
     /// measured overlap (see [`TrackSimulation::default`]; BENCHMARKS.md, the overlap law).
     pub fn default_preset() -> Self {
         TrackScenario {
@@ -369,6 +371,7 @@ impl TrackScenario {
         ) = (None, None, None);
         sim.normal_law = NormalLaw::Rate;
         sim.theta = 0.5;
+        sim.dt = 2e-4;
         s.solver.skip = 0.0;
         s.ddm = Some(DdmSettings {
             subdomains: [7, 1, 1],
@@ -838,7 +841,7 @@ mod tests {
         assert_eq!(d, preset.simulation);
         assert_eq!(
             (d.contact_stiffness, d.tangential_stiffness, d.max_closure),
-            (Some(2.5e5), Some(2.5e5), Some(7.5e-4))
+            (Some(1e6), Some(1e6), Some(7.5e-4))
         );
         assert_eq!(d.normal_law, NormalLaw::Overlap);
         let rigid =
@@ -890,8 +893,9 @@ mod tests {
         assert_eq!(TrackScenario::paper_preset().simulation.dt, 2e-4);
         let d = TrackScenario::default_preset();
         assert_eq!(d.ddm.as_ref().unwrap().subdomains, [2, 2, 1]);
-        assert_eq!(d.steps(), 8820);
+        assert_eq!(d.steps(), 17640);
         let paper = TrackScenario::paper_preset();
+        assert_eq!(paper.steps(), 8820);
         assert_eq!(paper.simulation.contact_stiffness, None);
         assert_eq!(TrackScenario::from_toml(&paper.to_toml()).unwrap(), paper);
     }

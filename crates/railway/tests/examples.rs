@@ -42,14 +42,15 @@ fn every_example_scenario_validates() {
 }
 
 /// `examples/soft_tamping.toml` is the default job with the settings its comment measures:
-/// soft compliant contacts under the overlap law with the hyperbolic closure.
+/// compliant contacts under the overlap law with the hyperbolic closure, at dt = 1e-4 s.
 #[test]
 fn the_soft_tamping_example_uses_the_overlap_law() {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/soft_tamping.toml");
     let s = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
     let sim = &s.simulation;
     assert_eq!(sim.normal_law, NormalLaw::Overlap);
-    assert_eq!(sim.contact_stiffness, Some(2.5e5));
+    assert_eq!(sim.contact_stiffness, Some(1e6));
     assert_eq!(sim.max_closure, Some(7.5e-4));
-    assert_eq!(s.steps(), 8820);
+    assert_eq!(s.steps(), 17640);
+    assert_eq!(s, TrackScenario::default_preset());
 }
