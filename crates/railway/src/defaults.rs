@@ -28,7 +28,7 @@ pub(crate) fn default_ddm() -> DdmSettings {
 pub(crate) const DEFAULT_STIFFNESS: f64 = 1e6;
 
 /// Time step of track runs (s): half the paper's, so that the contacts' own vibration at the
-/// closure's stiff end is resolved (ω h ≈ 1.6 at the cap with [`DEFAULT_STIFFNESS`] and a
+/// closure's stiff end is resolved (ω h ≈ 1.8 at the cap with [`DEFAULT_STIFFNESS`] and an
 /// 80 g grain); at 2e-4 s the same springs leave ten times more steps unconverged.
 pub(crate) const DEFAULT_DT: f64 = 1e-4;
 
