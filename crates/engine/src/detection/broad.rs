@@ -24,23 +24,19 @@ const INCREMENTAL_TESTS: usize = 4_000_000;
 /// skin lets bodies leave their enlarged box less often but keeps more pairs to filter.
 const SKIN_FRACTION: f64 = 0.05;
 
-/// The median of the candidates' largest box extents (0 without candidates).
-fn median_extent(aabbs: &[Aabb], candidates: &[u32]) -> f64 {
-    let mut e: Vec<f64> = candidates
+/// Each candidate's largest box extent, in the candidates' order.
+fn extents(aabbs: &[Aabb], candidates: &[u32]) -> Vec<f64> {
+    candidates
         .par_iter()
-        .with_min_len(4096)
+        .with_min_len(1024)
         .map(|&i| (aabbs[i as usize].max - aabbs[i as usize].min).max_element())
-        .collect();
-    if e.is_empty() {
-        return 0.0;
-    }
-    let mid = e.len() / 2;
-    let (_, m, _) = e.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-    if m.is_finite() {
-        *m
-    } else {
-        0.0
-    }
+        .collect()
+}
+
+/// The median of `values` (the upper one of an even count; they are reordered). Not empty.
+fn median(values: &mut [f64]) -> f64 {
+    let mid = values.len() / 2;
+    *values.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
 }
 
 /// Axis-aligned bounding box.
@@ -145,7 +141,9 @@ impl BroadPhase {
             Vec::new()
         };
         if !comparable || escaped.len().saturating_mul(candidates.len()) > INCREMENTAL_TESTS {
-            self.skin = SKIN_FRACTION * median_extent(aabbs, candidates);
+            let mut e = extents(aabbs, candidates);
+            let m = if e.is_empty() { 0.0 } else { median(&mut e) };
+            self.skin = SKIN_FRACTION * if m.is_finite() { m } else { 0.0 };
             let skin = self.skin;
             let mut fat = std::mem::take(&mut self.fat);
             fat.clear();
@@ -217,17 +215,10 @@ impl BroadPhase {
         }
         // Cell size: the largest extent among the bodies that move (the grains); anything bigger
         // than 2 cells is "large".
-        let mut extents: Vec<f64> = candidates
-            .par_iter()
-            .with_min_len(1024)
-            .map(|&i| (aabbs[i as usize].max - aabbs[i as usize].min).max_element())
-            .collect();
+        let mut extents = extents(aabbs, candidates);
         let cell = {
             // Median × 2 bounds the cell by typical grains even when a few bodies are huge.
-            let mut e = extents.clone();
-            let mid = e.len() / 2;
-            let (_, m, _) = e.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-            let median = *m;
+            let median = median(&mut extents.clone());
             let max_small = extents
                 .iter()
                 .copied()
