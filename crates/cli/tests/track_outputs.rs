@@ -968,7 +968,14 @@ fn track_run_writes_sections_through_the_bed() {
                     u.abs() <= half + 0.05 && u > -half - 0.05,
                     "{name}: u = {u}"
                 );
-                assert!(z > 0.0 && z < track.top() + 0.05, "{name}: z = {z}");
+                // A grain carrying load lies in the bed; one without may be in flight: the
+                // tines squeeze a grain out of this small bed at 2.4 m/s, which rises 0.29 m
+                // above where it left the bed (z = 0.375 m at the end of the squeeze).
+                let ceiling = if load > 0.0 { 0.05 } else { 0.5 };
+                assert!(
+                    z > 0.0 && z < track.top() + ceiling,
+                    "{name}: z = {z}, load {load} N"
+                );
                 assert!(speed.is_finite() && speed >= 0.0 && load >= 0.0, "{name}");
             }
         }

@@ -845,6 +845,61 @@ fn crossed_box_edges_give_one_point_at_the_analytic_distance() {
     }
 }
 
+/// An edge of B lying across a face of A, tilted by `alpha` so that it sinks deeper at one end:
+/// the least penetration is along the edge–edge axis, and the contact has two ends. A single
+/// point would jump between them as the bodies rock; the manifold holds both.
+#[test]
+fn edge_lying_across_a_face_gives_both_ends() {
+    let h = 0.02;
+    let big = 0.04;
+    let r2 = std::f64::consts::SQRT_2;
+    let alert = 1e-3;
+    let a = Body::from_build(&cube(h), DVec3::ZERO, DQuat::IDENTITY);
+    for alpha_deg in [0.2, 1.0, 2.0, 5.0] {
+        let alpha: f64 = f64::to_radians(alpha_deg);
+        for depth in [1e-3, 2e-4, 0.0, -3e-4] {
+            // B's bottom edge runs along (cos α, 0, −sin α), beyond both x-edges of A's top face;
+            // centre placed so that it passes at `depth` below A's top edge x = +h.
+            let rot =
+                DQuat::from_rotation_y(alpha) * DQuat::from_rotation_x(std::f64::consts::FRAC_PI_4);
+            let t = (h + big * r2 * alpha.sin()) / alpha.cos();
+            let center = DVec3::new(
+                0.0,
+                0.0,
+                h - depth + t * alpha.sin() + big * r2 * alpha.cos(),
+            );
+            let b = Body::from_build(&cube(big), center, rot);
+            let n = DVec3::new(alpha.sin(), 0.0, alpha.cos());
+            // Gap along n at the end above A's edge x = ±h: B's edge is orthogonal to n, A's top
+            // face rises along n by h·sin α per unit x.
+            let near = -depth * alpha.cos();
+            let far = near + 2.0 * h * alpha.sin();
+            for swapped in [false, true] {
+                let m = if swapped {
+                    polyhedron_polyhedron(&b.world(), &a.world(), alert)
+                } else {
+                    polyhedron_polyhedron(&a.world(), &b.world(), alert)
+                }
+                .unwrap_or_else(|| panic!("α {alpha_deg}°, depth {depth}: no contact"));
+                let sign = if swapped { -1.0 } else { 1.0 };
+                let ctx = format!("α {alpha_deg}°, depth {depth}, swapped {swapped}: {m:?}");
+                assert!((m.normal - sign * n).length() < 1e-12, "{ctx}");
+                let expected: Vec<f64> = [near, far].into_iter().filter(|&g| g <= alert).collect();
+                assert_eq!(m.points.len(), expected.len(), "{ctx}");
+                for (p, (&g, x)) in m.points.iter().zip(expected.iter().zip([h, -h])) {
+                    assert!((p.gap - g).abs() < 1e-12, "gap {} vs {g}: {ctx}", p.gap);
+                    // The foot on A: on its top face, on the edge x = ±h.
+                    let foot = p.point - 0.5 * p.gap * n;
+                    assert!(
+                        (foot.z - h).abs() < 1e-12 && (foot.x - x).abs() < 1e-12,
+                        "{ctx}"
+                    );
+                }
+            }
+        }
+    }
+}
+
 #[test]
 fn crossed_tetrahedra_apart_beyond_alert_give_no_contact() {
     // Regular tetrahedra, A's top edge along y and B's bottom edge along x: no face normal

@@ -214,8 +214,20 @@ fn full_cycle_compacts_the_ballast_under_the_block() {
     let end_time = m.cycle.duration;
     run_to(&mut m, end_time);
     let end = m.indicators.values(&m.world);
-    // Released, the block rests on the tamped ballast, above its initial level.
-    assert!(end[block_z] > z0 - 0.005 && end[block_z] < z0 + s.tamping.lift + 1e-3);
+    // Released, the block rests on the tamped ballast, above its initial level and about at
+    // the lifted one. Measured on this bed's packs 3, 4, 5 and 7 (the test's seed; edge contacts
+    // given both ends, BENCHMARKS.md session 27): +15.5, +15.4, +14.9 and +16.4 mm for the
+    // 15 mm lift, up to 1.4 mm above the lifted level (the old contacts' packs were not
+    // measured); hence lift + 2 mm above.
+    eprintln!(
+        "released block {:+.2} mm from its level before the lift",
+        (end[block_z] - z0) * 1e3
+    );
+    assert!(
+        end[block_z] > z0 - 0.005 && end[block_z] < z0 + s.tamping.lift + 2e-3,
+        "released block {} m from its level before the lift",
+        end[block_z] - z0
+    );
     let n = s.steps();
     assert_eq!(m.world.step_index, n);
 }

@@ -18,7 +18,9 @@
 //!    and an incident face on the other body; the incident polygon is clipped by the side planes
 //!    of the reference face (Sutherland–Hodgman); every clipped point within the alert distance,
 //!    and every other vertex of the incident body within it above the reference face, becomes a
-//!    contact point. An edge axis gives one point between the closest points of the two edges.
+//!    contact point. An edge axis gives one point between the closest points of the two edges,
+//!    and, when a face next to either edge is nearly orthogonal to the axis, the points of that
+//!    face clipped along the axis (an edge lying across a face has two ends, see `edge_manifold`).
 //!
 //! Touching or overlapping, the largest separation over these axes is minus the penetration
 //! depth (the largest over all directions). Apart, another direction (say, for two vertices
@@ -47,6 +49,12 @@ const PREFER_RELATIVE: f64 = 1e-5;
 /// Edge pairs whose directions make an angle with squared sine below this are parallel: their
 /// cross product has no reliable direction, and the face axes already cover them.
 const PARALLEL_SIN2: f64 = 1e-20;
+/// An edge–edge contact also gets the points of a face contact along its axis when a face next
+/// to one of the edges makes an angle with the axis whose cosine is at least this (2.6°): see
+/// [`edge_manifold`]. Grains' hulls meet at ridges of nearly coplanar triangles, where a face
+/// of the other body rests across the ridge and an edge pair is the deepest axis; a wider cone
+/// mostly adds points beyond the alert distance's reach and costs sweeps on every contact.
+const EDGE_FACE_COS: f64 = 0.999;
 /// Edges of B whose Gauss-map arcs live on the stack (a 20-vertex grain has at most 54 edges).
 const STACK_EDGES: usize = 64;
 /// Vertices whose proximity masks live on the stack.
@@ -61,7 +69,8 @@ const STACK_POLYGON: usize = 48;
 ///
 /// The normal points from `a` toward `b`; each point lies midway between the two surfaces and
 /// carries its gap (negative when overlapping), at most `alert`. At most four points, reduced by
-/// [`reduce_to_four`]. Face contacts give up to four points, edge–edge contacts one.
+/// [`reduce_to_four`]. Face contacts give up to four points, edge–edge contacts one, or more
+/// when a face next to either edge is within 2.6° of face-on.
 ///
 /// Touching or overlapping, the deepest gap is minus the exact penetration depth (up to the
 /// axis preference tolerance, `1e-5` of the smaller circumradius). Apart within `alert`, gaps
@@ -216,7 +225,7 @@ fn choose(
         }
     }
     match (edge, first) {
-        (Some(e), _) if e.sep >= best - tol => edge_manifold(a, b, &e),
+        (Some(e), _) if e.sep >= best - tol => edge_manifold(a, b, &e, alert),
         (_, Some(first)) => first,
         // Unreachable: the best axis is a face or the edge pair.
         _ => face_manifold(a, b, face_a, alert, false),
@@ -518,7 +527,62 @@ fn face_manifold(
 
     let ref_loop = face_loop(r, axis.face);
     let inc_loop = face_loop(o, incident_face(o, n, axis.support as u32));
+    let mut points = Vec::with_capacity(inc_loop.len() + 4);
+    let mut witness = f64::INFINITY;
+    let mut keep = |x: DVec3| {
+        let gap = n.dot(x) - offset;
+        if gap <= alert {
+            points.push(ManifoldPoint {
+                point: x - 0.5 * gap * n,
+                gap,
+            });
+            witness = witness.min(gap.abs());
+        }
+    };
+    clip_face(r, ref_loop, o, inc_loop, n, &mut keep);
 
+    // Other vertices of `o` within alert of the reference plane and inside the reference face
+    // also bear: the far end of an edge resting on the face may lie on no face holding the
+    // deepest vertex, and the body would pivot about a single point.
+    let inside = |x: DVec3| {
+        ref_loop.iter().enumerate().all(|(i, &v)| {
+            let p = r.vertices[v as usize];
+            let q = r.vertices[ref_loop[(i + 1) % ref_loop.len()] as usize];
+            (q - p).cross(n).dot(x - p) <= 0.0
+        })
+    };
+    let extra = o.vertices.iter().enumerate().filter_map(|(i, &x)| {
+        let candidate = n.dot(x) - offset <= alert && !inc_loop.contains(&(i as u32));
+        (candidate && inside(x)).then_some(x)
+    });
+    extra.for_each(&mut keep);
+    if points.is_empty() {
+        // Apart, with the deepest vertex outside the reference face's prism (e.g. boxes corner
+        // to corner): keep one point at the deepest vertex with the axis separation as gap.
+        let v = o.vertices[axis.support];
+        points.push(ManifoldPoint {
+            point: v - 0.5 * axis.sep * n,
+            gap: axis.sep,
+        });
+    }
+    (Manifold { normal, points }, witness)
+}
+
+/// Clips the incident face loop `inc_loop` of `o` by the side planes of the reference face
+/// loop `ref_loop` of `r` and hands each vertex of the clipped polygon to `each`.
+///
+/// The side planes are parallel to `dir` (a unit vector with a positive component along the
+/// reference face's normal, CCW orientation of the loop about it): the clipped polygon is the
+/// part of the incident face whose projection along `dir` onto the reference plane lies inside
+/// the reference face.
+fn clip_face(
+    r: &WorldPolyhedron,
+    ref_loop: &[u32],
+    o: &WorldPolyhedron,
+    inc_loop: &[u32],
+    dir: DVec3,
+    mut each: impl FnMut(DVec3),
+) {
     let cap = inc_loop.len() + ref_loop.len();
     let mut stack = [[DVec3::ZERO; STACK_POLYGON]; 2];
     let mut heap = [Vec::new(), Vec::new()];
@@ -540,50 +604,14 @@ fn face_manifold(
         let p = r.vertices[v as usize];
         let q = r.vertices[ref_loop[(i + 1) % ref_loop.len()] as usize];
         // Outward normal of the side plane through edge (p, q) of the CCW reference loop.
-        let side = (q - p).cross(n);
+        let side = (q - p).cross(dir);
         len = clip(&src[..len], dst, side, side.dot(p));
         std::mem::swap(&mut src, &mut dst);
         if len == 0 {
             break;
         }
     }
-
-    // Other vertices of `o` within alert of the reference plane and inside the reference face
-    // also bear: the far end of an edge resting on the face may lie on no face holding the
-    // deepest vertex, and the body would pivot about a single point.
-    let inside = |x: DVec3| {
-        ref_loop.iter().enumerate().all(|(i, &v)| {
-            let p = r.vertices[v as usize];
-            let q = r.vertices[ref_loop[(i + 1) % ref_loop.len()] as usize];
-            (q - p).cross(n).dot(x - p) <= 0.0
-        })
-    };
-    let extra = o.vertices.iter().enumerate().filter_map(|(i, &x)| {
-        let candidate = n.dot(x) - offset <= alert && !inc_loop.contains(&(i as u32));
-        (candidate && inside(x)).then_some(x)
-    });
-    let mut points = Vec::with_capacity(len + 4);
-    let mut witness = f64::INFINITY;
-    for x in src[..len].iter().copied().chain(extra) {
-        let gap = n.dot(x) - offset;
-        if gap <= alert {
-            points.push(ManifoldPoint {
-                point: x - 0.5 * gap * n,
-                gap,
-            });
-            witness = witness.min(gap.abs());
-        }
-    }
-    if points.is_empty() {
-        // Apart, with the deepest vertex outside the reference face's prism (e.g. boxes corner
-        // to corner): keep one point at the deepest vertex with the axis separation as gap.
-        let v = o.vertices[axis.support];
-        points.push(ManifoldPoint {
-            point: v - 0.5 * axis.sep * n,
-            gap: axis.sep,
-        });
-    }
-    (Manifold { normal, points }, witness)
+    src[..len].iter().copied().for_each(&mut each);
 }
 
 /// Vertex loop of face `f`.
@@ -643,9 +671,26 @@ fn clip(input: &[DVec3], out: &mut [DVec3], side: DVec3, offset: f64) -> usize {
     len
 }
 
-/// Edge–edge contact: one point midway between the closest points of the two edges, and their
-/// distance as witness distance.
-fn edge_manifold(a: &WorldPolyhedron, b: &WorldPolyhedron, axis: &EdgeAxis) -> (Manifold, f64) {
+/// Edge–edge contact: a point midway between the closest points of the two edges, with the
+/// axis separation as gap, and their distance as witness distance.
+///
+/// When a face next to one of the edges is nearly orthogonal to the axis (within
+/// [`EDGE_FACE_COS`]), the bodies are close to face-on over more than that point: e.g. an edge
+/// of B lying across a face of A, sunk a little more at one end. The point alone then jumps
+/// between the two ends of the contact as the bodies rock (each end is the deepest in turn, with
+/// a different edge of A), and the torque of a single point pumps the rocking. So the manifold
+/// also gets the points of the face contact along the same axis: the best aligned of those
+/// faces is the reference, the face of the other body's edge most opposed to it the incident
+/// face, clipped to the reference face's prism along the axis; each clipped point is joined to
+/// the reference plane along the axis, and that length is its gap. Each such point pairs a point
+/// of each surface on a line along the axis, so its gap is at least the axis separation: the
+/// deepest gap stays the separation.
+fn edge_manifold(
+    a: &WorldPolyhedron,
+    b: &WorldPolyhedron,
+    axis: &EdgeAxis,
+    alert: f64,
+) -> (Manifold, f64) {
     let ea = a.shape.edges[axis.edge_a];
     let eb = b.shape.edges[axis.edge_b];
     let pa = a.vertices[ea[0] as usize];
@@ -656,17 +701,80 @@ fn edge_manifold(a: &WorldPolyhedron, b: &WorldPolyhedron, axis: &EdgeAxis) -> (
         pb,
         b.vertices[eb[1] as usize] - pb,
     );
-    let points = vec![ManifoldPoint {
+    let n = axis.normal;
+    let mut points = vec![ManifoldPoint {
         point: 0.5 * (qa + qb),
         gap: axis.sep,
     }];
-    (
-        Manifold {
-            normal: axis.normal,
-            points,
-        },
-        (qb - qa).length(),
-    )
+    if let Some((r, ref_face, o, inc_face, dir)) = edge_faces(a, b, axis) {
+        let (m, d) = (r.face_normals[ref_face], r.face_offsets[ref_face]);
+        let along = m.dot(dir);
+        clip_face(
+            r,
+            face_loop(r, ref_face),
+            o,
+            face_loop(o, inc_face),
+            dir,
+            |x| {
+                // `x + s·dir` lies on the reference plane; `dir` points out of `r`, so the
+                // surfaces are `−s` apart along the axis (negative when overlapping).
+                let s = (d - m.dot(x)) / along;
+                if -s <= alert {
+                    points.push(ManifoldPoint {
+                        point: x + 0.5 * s * dir,
+                        gap: -s,
+                    });
+                }
+            },
+        );
+    }
+    (Manifold { normal: n, points }, (qb - qa).length())
+}
+
+/// The faces of an edge–edge contact to clip (see [`edge_manifold`]): the reference body and
+/// face, the incident body and face, and the axis oriented out of the reference body; `None`
+/// when no face next to either edge is within [`EDGE_FACE_COS`] of the axis. The reference is
+/// the best aligned of the four faces next to the two edges (A's before B's, first on ties); the
+/// incident face is the one next to the other body's edge most opposed to the oriented axis.
+#[allow(clippy::type_complexity)]
+fn edge_faces<'w, 's>(
+    a: &'w WorldPolyhedron<'s>,
+    b: &'w WorldPolyhedron<'s>,
+    axis: &EdgeAxis,
+) -> Option<(
+    &'w WorldPolyhedron<'s>,
+    usize,
+    &'w WorldPolyhedron<'s>,
+    usize,
+    DVec3,
+)> {
+    let n = axis.normal;
+    let faces_a = a.shape.edge_faces[axis.edge_a];
+    let faces_b = b.shape.edge_faces[axis.edge_b];
+    let mut best: Option<(bool, usize)> = None;
+    let mut best_cos = EDGE_FACE_COS;
+    for (of_b, body, faces, sign) in [(false, a, faces_a, 1.0), (true, b, faces_b, -1.0)] {
+        for f in faces {
+            let c = sign * body.face_normals[f as usize].dot(n);
+            if c >= best_cos && best.is_none_or(|_| c > best_cos) {
+                best_cos = c;
+                best = Some((of_b, f as usize));
+            }
+        }
+    }
+    let (of_b, ref_face) = best?;
+    let (r, o, dir, inc_faces) = if of_b {
+        (b, a, -n, faces_a)
+    } else {
+        (a, b, n, faces_b)
+    };
+    let [f0, f1] = inc_faces.map(|f| f as usize);
+    let inc_face = if o.face_normals[f1].dot(dir) < o.face_normals[f0].dot(dir) {
+        f1
+    } else {
+        f0
+    };
+    Some((r, ref_face, o, inc_face, dir))
 }
 
 /// Closest points of segments `p1 + s·d1` and `p2 + t·d2`, `s, t ∈ [0, 1]` (Ericson, Real-Time
