@@ -28,12 +28,8 @@ struct Cycle {
     settled: f64,
 }
 
-fn cycle(seed: u64) -> Cycle {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/python/small_track.toml");
-    let mut s = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
-    assert_eq!(s.simulation.contact_stiffness, Some(1e7));
-    assert_eq!(s.simulation.tangential_stiffness, Some(5e6));
+/// The cycle of `s` on grain pack `seed`.
+fn cycle(mut s: TrackScenario, seed: u64) -> Cycle {
     s.ballast.seed = seed;
     let cache = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!(
         "ballast-converged-tamping-{}-{seed}",
@@ -94,11 +90,16 @@ fn the_small_track_cycle_converges_and_compacts_under_the_block() {
     let path =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/python/small_track.toml");
     let s = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+    assert_eq!(s.simulation.contact_stiffness, Some(1e7));
+    assert_eq!(s.simulation.tangential_stiffness, Some(5e6));
     let lift = s.tamping.lift;
     // The packs run side by side (each run's own result does not depend on it).
     let cycles: Vec<Cycle> = std::thread::scope(|scope| {
         let runs: Vec<_> = (3..=7)
-            .map(|seed| scope.spawn(move || cycle(seed)))
+            .map(|seed| {
+                let s = s.clone();
+                scope.spawn(move || cycle(s, seed))
+            })
             .collect();
         runs.into_iter().map(|r| r.join().unwrap()).collect()
     });

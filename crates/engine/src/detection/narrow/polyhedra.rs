@@ -706,7 +706,14 @@ fn edge_manifold(
         point: 0.5 * (qa + qb),
         gap: axis.sep,
     }];
-    if let Some((r, ref_face, o, inc_face, dir)) = edge_faces(a, b, axis) {
+    if let Some(EdgeFaces {
+        r,
+        ref_face,
+        o,
+        inc_face,
+        dir,
+    }) = edge_faces(a, b, axis)
+    {
         let (m, d) = (r.face_normals[ref_face], r.face_offsets[ref_face]);
         let along = m.dot(dir);
         clip_face(
@@ -731,23 +738,27 @@ fn edge_manifold(
     (Manifold { normal: n, points }, (qb - qa).length())
 }
 
-/// The faces of an edge–edge contact to clip (see [`edge_manifold`]): the reference body and
-/// face, the incident body and face, and the axis oriented out of the reference body; `None`
-/// when no face next to either edge is within [`EDGE_FACE_COS`] of the axis. The reference is
-/// the best aligned of the four faces next to the two edges (A's before B's, first on ties); the
-/// incident face is the one next to the other body's edge most opposed to the oriented axis.
-#[allow(clippy::type_complexity)]
+/// The faces of an edge–edge contact to clip (see [`edge_manifold`]).
+struct EdgeFaces<'w, 's> {
+    /// Reference body and face.
+    r: &'w WorldPolyhedron<'s>,
+    ref_face: usize,
+    /// Incident body and face.
+    o: &'w WorldPolyhedron<'s>,
+    inc_face: usize,
+    /// The axis oriented out of the reference body.
+    dir: DVec3,
+}
+
+/// The faces of an edge–edge contact to clip; `None` when no face next to either edge is
+/// within [`EDGE_FACE_COS`] of the axis. The reference is the best aligned of the four faces
+/// next to the two edges (A's before B's, first on ties); the incident face is the one next to
+/// the other body's edge most opposed to the oriented axis.
 fn edge_faces<'w, 's>(
     a: &'w WorldPolyhedron<'s>,
     b: &'w WorldPolyhedron<'s>,
     axis: &EdgeAxis,
-) -> Option<(
-    &'w WorldPolyhedron<'s>,
-    usize,
-    &'w WorldPolyhedron<'s>,
-    usize,
-    DVec3,
-)> {
+) -> Option<EdgeFaces<'w, 's>> {
     let n = axis.normal;
     let faces_a = a.shape.edge_faces[axis.edge_a];
     let faces_b = b.shape.edge_faces[axis.edge_b];
@@ -774,7 +785,13 @@ fn edge_faces<'w, 's>(
     } else {
         f0
     };
-    Some((r, ref_face, o, inc_face, dir))
+    Some(EdgeFaces {
+        r,
+        ref_face,
+        o,
+        inc_face,
+        dir,
+    })
 }
 
 /// Closest points of segments `p1 + s·d1` and `p2 + t·d2`, `s, t ∈ [0, 1]` (Ericson, Real-Time
