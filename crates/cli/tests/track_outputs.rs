@@ -95,7 +95,7 @@ const D_LOWER: f64 = 0.0315;
 const BED_OVERLAP: f64 = 2e-3;
 
 /// Columns the track model adds for one block and 4 tines, in order.
-const TRACK_COLUMNS: [&str; 41] = [
+const TRACK_COLUMNS: [&str; 42] = [
     "compacity_under_block_1",
     "compacity_crib_0",
     "compacity_crib_1",
@@ -137,6 +137,7 @@ const TRACK_COLUMNS: [&str; 41] = [
     "tine_work_2_J",
     "tine_work_3_J",
     "tine_work_4_J",
+    "block_drive_1_z_N",
 ];
 
 /// The runs shared by the tests.
@@ -669,6 +670,28 @@ fn check_series(r: &Runs, dir: &Path) {
         }
     }
 
+    // The lifting unit's force on the block: none while it holds the block kinematically or
+    // after the lowering; during it, within its bound falling from `lowering_force` to zero.
+    let drive = s.values("block_drive_1_z_N");
+    let (start, over) = (cycle.release, sc.tamping.lowering());
+    let f0 = sc.tamping.lowering_force(&sc.track);
+    let mut lowering_rows = 0;
+    for k in 0..n {
+        let t = time[k];
+        if t <= start + 1e-9 || t > start + over + dt {
+            assert_eq!(drive[k], 0.0, "t {t}: block drive {} N", drive[k]);
+        } else {
+            let bound = f0 * (1.0 - (t - start) / over).max(0.0);
+            assert!(
+                drive[k].abs() <= bound * (1.0 + 1e-9) + 1e-9,
+                "t {t}: block drive {} N, bound {bound} N",
+                drive[k]
+            );
+            lowering_rows += 1;
+        }
+    }
+    assert!(lowering_rows > 0, "no row during the lowering");
+
     // Tine forces: finite, zero while the tines wait above the bed, and pushing them up
     // (on average) while they plunge into the ballast.
     for j in 1..=4 {
@@ -841,6 +864,7 @@ fn track_report_plots_the_indicators() {
             ("blocks", &[x, "block height z (mm)"]),
             ("coordination", &[x, "contacts per grain (-)"]),
             ("tine_work", &[x, "work (J)", "tine 1"]),
+            ("block_drives", &[x, "drive force (N)"]),
             (
                 "solver",
                 &[x, "contacts (-)", "iterations (-)", "residual (-)"],

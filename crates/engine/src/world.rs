@@ -11,7 +11,7 @@
 //!    and `ωᵢ₊₁ = I_w(qᵢ₊₁)⁻¹ Lᵢ₊₁`; overlaps are reduced by a position-only pseudo-velocity
 //!    (see [`crate::solver::correction`]), which leaves the velocities untouched.
 
-use crate::bodies::{BodyKind, BodySet};
+use crate::bodies::{BodyKind, BodySet, Limits};
 use crate::contacts::ContactSet;
 use crate::detection::{Detector, RawContact};
 use crate::laws::{default_overlap_cap, Elastic, FrictionTable, NormalLaw};
@@ -383,9 +383,9 @@ impl World {
         }
     }
 
-    /// The driver of body `i` if it is a force-limited driven body this step.
-    pub(crate) fn force_limited(&self, i: usize) -> Option<&crate::bodies::Driver> {
-        force_limited(&self.bodies, i)
+    /// The driver of body `i` and its bounds if it is a force-limited driven body this step.
+    pub(crate) fn force_limited(&self, i: usize) -> Option<(&crate::bodies::Driver, Limits)> {
+        force_limited(&self.bodies, i, self.time, self.time + self.settings.dt)
     }
 
     /// The name of group `g` (its number when the builder gave no names).
@@ -611,8 +611,8 @@ impl World {
             .into_par_iter()
             .with_min_len(256)
             .map(|i| {
-                if let Some(d) = force_limited(b, i) {
-                    return limited_free_body(b, i, d, t0, t1);
+                if let Some((d, limits)) = force_limited(b, i, t0, t1) {
+                    return limited_free_body(b, i, d, limits, gravity * h, t0, t1);
                 }
                 let (v, w) = match b.kind[i] {
                     BodyKind::Dynamic => (b.velocity[i] + gravity * h, b.angular_velocity[i]),
@@ -638,7 +638,7 @@ impl World {
             .collect_into_vec(&mut self.scratch.solver_bodies);
         self.drives.clear();
         for i in 0..b.len() {
-            if let Some(d) = force_limited(b, i) {
+            if let Some((d, limits)) = force_limited(b, i, t0, t1) {
                 let (mut target_v, target_w) = d.velocity(t1);
                 if !d.catch_up_speed.iter().all(|&c| c == 0.0) {
                     // The lag left once this step's share of the velocity it starts with
@@ -649,8 +649,8 @@ impl World {
                     let inv_mass = self.scratch.solver_bodies[i].inv_mass;
                     for k in 0..3 {
                         let c = d.catch_up_speed[k];
-                        if c > 0.0 && d.max_force[k].is_finite() {
-                            target_v[k] += catch_up(left[k], c, d.max_force[k] * inv_mass, h);
+                        if c > 0.0 && limits.force[k].is_finite() {
+                            target_v[k] += catch_up(left[k], c, limits.force[k] * inv_mass, h);
                         }
                     }
                 }
@@ -658,12 +658,12 @@ impl World {
                     body: i as u32,
                     target_v,
                     target_w,
-                    bound_v: DVec3::from_array(d.max_force) * h,
-                    bound_w: DVec3::from_array(d.max_torque) * h,
+                    bound_v: DVec3::from_array(limits.force) * h,
+                    bound_w: DVec3::from_array(limits.torque) * h,
                     impulse_v: DVec3::ZERO,
                     impulse_w: DVec3::ZERO,
-                    translate: d.limits_translation(),
-                    rotate: d.limits_rotation(),
+                    translate: limits.translation(),
+                    rotate: limits.rotation(),
                 });
             }
         }
@@ -911,33 +911,51 @@ fn add_to<T: Copy + std::ops::AddAssign>(table: &mut Vec<(u32, T)>, body: u32, x
     }
 }
 
-/// The driver of body `i` if it is driven (not yet released) with a force limit.
-fn force_limited(b: &BodySet, i: usize) -> Option<&crate::bodies::Driver> {
+/// The driver of body `i` and its bounds over the step from `t0` to `t1` if it is driven (not
+/// yet released) with a force limit.
+fn force_limited(
+    b: &BodySet,
+    i: usize,
+    t0: f64,
+    t1: f64,
+) -> Option<(&crate::bodies::Driver, Limits)> {
     match (b.kind[i], &b.driver[i]) {
-        (BodyKind::Kinematic, Some(d)) if d.is_force_limited() => Some(d),
+        (BodyKind::Kinematic, Some(d)) => {
+            let limits = d.limits(t0, t1);
+            limits.any().then_some((d, limits))
+        }
         _ => None,
     }
 }
 
 /// Free velocities of a force-limited driven body over `[t0, t1]`: a limited part keeps the
 /// velocity it had, less the superposed velocity of `t0`, plus that of `t1` (its weight is
-/// carried by the drive); an unlimited part takes the program's velocity at `t1`. The body
-/// has its mass (inertia) in the solver where its translation (rotation) is limited.
+/// carried by the drive, except during a gradual release); an unlimited part takes the
+/// program's velocity at `t1`. The body has its mass (inertia) in the solver where its
+/// translation (rotation) is limited.
 fn limited_free_body(
     b: &BodySet,
     i: usize,
     d: &crate::bodies::Driver,
+    limits: Limits,
+    gravity_h: DVec3,
     t0: f64,
     t1: f64,
 ) -> SolverBody {
     let (pv, pw) = d.velocity(t1);
     let (s0v, s0w) = d.superposed.at(t0);
     let (s1v, s1w) = d.superposed.at(t1);
-    let (translate, rotate) = (d.limits_translation(), d.limits_rotation());
+    let (translate, rotate) = (limits.translation(), limits.rotation());
     let r = DMat3::from_quat(b.orientation[i]);
+    // A body being released weighs on its drive's falling bound.
+    let weight = if d.releasing(t0) {
+        gravity_h
+    } else {
+        DVec3::ZERO
+    };
     SolverBody {
         v: if translate {
-            b.velocity[i] - s0v + s1v
+            b.velocity[i] - s0v + s1v + weight
         } else {
             pv
         },

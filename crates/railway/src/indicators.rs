@@ -20,6 +20,9 @@
 //!   start, its drive force times the distance the tine moved, step by step
 //!   ([`World::drive_work`]; the vibration, imposed on top, is not counted). Negative while
 //!   the ballast pushes the tine back against its cylinder.
+//! * `block_drive_K_z_N`: vertical force the lifting unit exerts on block K over the last
+//!   step while it lets the block down (within `±lowering_force`, falling to zero; see
+//!   [`crate::tamping`]), 0 while the block is held kinematically or free.
 
 use crate::compacity::solid_volume;
 use crate::scene::Layout;
@@ -100,6 +103,9 @@ impl Indicators {
         for j in 1..=layout.tines.len() {
             names.push(format!("tine_work_{j}_J"));
         }
+        for k in 1..=blocks.len() {
+            names.push(format!("block_drive_{k}_z_N"));
+        }
         Indicators {
             names,
             volumes,
@@ -153,6 +159,10 @@ impl Indicators {
         }
         out.push(self.coordination(world));
         out.extend(self.tines.iter().map(|[blade, _]| world.drive_work(*blade)));
+        for &i in &self.blocks {
+            let d = world.drives().iter().find(|d| d.body as usize == i);
+            out.push(d.map_or(0.0, |d| d.impulse_v.z / h));
+        }
         out
     }
 

@@ -12,7 +12,7 @@
 //! | squeeze   | 0.40     | 1.20   | the tines close toward the block by `squeeze`            |
 //! | hold      | 1.20     | 1.30   | the tines stay closed                                   |
 //! | withdraw  | 1.30     | 1.55   | the tines go back up to their start height              |
-//! | lower     | 1.55     | 1.764  | the blocks are released and settle on the new ballast    |
+//! | lower     | 1.55     | 1.764  | the blocks are let down onto the new ballast and settle  |
 //!
 //! Tines vibrate horizontally along the track (displacement `amplitude · sin(2π f t)`, the
 //! tines either side of the block in mirror image) from the start of their insertion to the
@@ -32,6 +32,18 @@
 //! superposed on the squeeze whatever the force (the eccentric drives the tine arm). Across
 //! the track and in rotation the tines are held by the unit's frame (no limit). A tine moves
 //! with the mass `tine_mass` (tine and its share of the arm).
+//!
+//! # Letting the track down
+//!
+//! The blocks are held kinematically at their lift until the last withdrawal. Then the
+//! lifting unit lets them down as a machine does, not at once: over `lowering_time` (default
+//! half the lower phase) each block keeps its held position with a force, along each axis,
+//! whose bound falls linearly from `lowering_force` (default twice the block's weight) to
+//! zero, its weight included (a gradual release, [`ballast_engine::bodies::driver`]); from
+//! then on the block is free and settles. Let go at once, a block held over loaded ballast,
+//! or beside a grain wedged between it and a wall, is launched by the energy the contacts
+//! stored; the falling bound takes that energy out. The force is reported per block
+//! (`block_drive_K_z_N`).
 //!
 //! # Tines
 //!
@@ -97,6 +109,17 @@ pub struct TampingSpec {
     /// program's velocity only and a distance lost stays lost.
     #[serde(skip_serializing_if = "is_zero")]
     pub catch_up_speed: f64,
+    /// Duration (s) over which the lifting unit lets the blocks down onto the tamped ballast,
+    /// from the start of the lower phase: its holding force falls linearly from
+    /// `lowering_force` to zero, then the blocks are free. 0: let go at once. Unset: half the
+    /// lower phase.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lowering_time: Option<f64>,
+    /// Force (N per block, along each axis) the lifting unit can exert on a block when it
+    /// starts letting it down (`inf`: it holds the block to the end of `lowering_time`).
+    /// Unset: twice the block's weight.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lowering_force: Option<f64>,
 }
 
 fn is_zero(x: &f64) -> bool {
@@ -128,6 +151,8 @@ impl Default for TampingSpec {
             insertion_force: DEFAULT_INSERTION_FORCE,
             tine_mass: 25.0,
             catch_up_speed: 0.0,
+            lowering_time: None,
+            lowering_force: None,
         }
     }
 }
@@ -141,6 +166,9 @@ pub(crate) const DEFAULT_SQUEEZE_FORCE: f64 = 3900.0;
 /// down on its 8 tines, plus its vertical cylinder (an estimate; the literature gives
 /// insertion speeds rather than forces).
 pub(crate) const DEFAULT_INSERTION_FORCE: f64 = 5000.0;
+
+/// Standard gravity (m/s²) for the blocks' weight.
+const STANDARD_GRAVITY: f64 = 9.81;
 
 /// One tine of the built cycle.
 #[derive(Clone, Debug, PartialEq)]
@@ -293,6 +321,24 @@ impl TampingSpec {
             }
         }
         check_range("tamping.tine_mass", self.tine_mass, 0.1, 1e4, "kg")?;
+        if let Some(t) = self.lowering_time {
+            check_range(
+                "tamping.lowering_time",
+                t,
+                0.0,
+                self.lower_time,
+                "s (within tamping.lower_time)",
+            )?;
+        }
+        if let Some(f) = self.lowering_force {
+            if f.is_nan() || f < 0.0 {
+                return Err(refuse(
+                    "tamping.lowering_force",
+                    f,
+                    "≥ 0 N per block (inf: held to the end of the lowering)",
+                ));
+            }
+        }
         check_range(
             "tamping.catch_up_speed",
             self.catch_up_speed,
@@ -316,6 +362,20 @@ impl TampingSpec {
             }
         }
         Ok(())
+    }
+
+    /// Duration of the blocks' lowering (s): `lowering_time`, or half the lower phase.
+    pub fn lowering(&self) -> f64 {
+        self.lowering_time.unwrap_or(0.5 * self.lower_time)
+    }
+
+    /// The lifting unit's force when the lowering starts (N per block): `lowering_force`, or
+    /// twice the weight of a block of `track`.
+    pub fn lowering_force(&self, track: &TrackSpec) -> f64 {
+        self.lowering_force.unwrap_or_else(|| {
+            let [a, b, c] = track.block_size;
+            2.0 * a * b * c * track.block_density * STANDARD_GRAVITY
+        })
     }
 
     /// Insertion depth: from the tips' start height to their lowest point (m).
@@ -418,6 +478,12 @@ impl TampingSpec {
             block_driver: Driver {
                 vz: vec![lift],
                 release_at: Some(release),
+                release_over: self.lowering(),
+                release_force: if self.lowering() > 0.0 {
+                    [self.lowering_force(track); 3]
+                } else {
+                    [f64::INFINITY; 3]
+                },
                 ..Driver::default()
             },
             tines,
@@ -492,6 +558,22 @@ mod tests {
         // Blocks: lifted by `lift`, released at the end of the withdrawal.
         assert!((displacement(&c.block_driver.vz, 0.0, 1.0) - s.lift).abs() < 1e-6);
         assert_eq!(c.block_driver.release_at, Some(p.end));
+        // Let down over half the lower phase from twice the block's weight (0.29 × 0.84 ×
+        // 0.22 m of concrete: 128.6 kg, 1,262 N), along each axis.
+        assert_eq!(c.block_driver.release_over, 0.5 * s.lower_time);
+        let weight = 0.29 * 0.84 * 0.22 * 2400.0 * 9.81;
+        for f in c.block_driver.release_force {
+            assert!((f - 2.0 * weight).abs() < 1e-9 * weight, "{f}");
+        }
+        assert!(c.block_driver.validate().is_ok());
+        // Let go at once: no force of a gradual release.
+        let at_once = TampingSpec {
+            lowering_time: Some(0.0),
+            ..s.clone()
+        };
+        let d = at_once.build(&track).block_driver;
+        assert_eq!(d.release_over, 0.0);
+        assert!(d.validate().is_ok());
     }
 
     #[test]
@@ -508,5 +590,13 @@ mod tests {
         assert_eq!(bad(&|s| s.open_gap = 0.3), "tamping.open_gap");
         assert_eq!(bad(&|s| s.tine_y = vec![0.6]), "tamping.tine_y");
         assert_eq!(bad(&|s| s.insertion_time = 0.0), "tamping.insertion_time");
+        assert_eq!(
+            bad(&|s| s.lowering_time = Some(0.3)),
+            "tamping.lowering_time"
+        );
+        assert_eq!(
+            bad(&|s| s.lowering_force = Some(-1.0)),
+            "tamping.lowering_force"
+        );
     }
 }

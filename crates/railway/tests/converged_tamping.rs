@@ -1,5 +1,5 @@
 //! The tamping cycle of `examples/python/small_track.toml` (about 750 grains, one 0.10 m block,
-//! the whole 0.47 s cycle at dt = 1e-4 s with contacts of 1e7 N/m per point normally and 5e6
+//! the whole 0.51 s cycle at dt = 1e-4 s with contacts of 1e7 N/m per point normally and 5e6
 //! tangentially, and ≤ 400 sweeps) on the bed's five grain packs (`[ballast] seed` 3–7):
 //! the settings that make NLGS converge through the insertion and the squeeze, held to the
 //! quality they were measured at (BENCHMARKS.md, sessions 13, 19 and 27), with the machine's
@@ -50,6 +50,8 @@ fn cycle(mut s: TrackScenario, seed: u64) -> Cycle {
     let steps = s.steps();
     let (mut unconverged, mut worst, mut deepest) = (0u64, 0.0f64, 0.0f64);
     let limits = [s.tamping.squeeze_force, s.tamping.insertion_force];
+    let lowering = s.tamping.lowering_force(&s.track);
+    let blocks = model.layout.blocks.clone();
     for _ in 0..steps {
         let r = model.world.step();
         unconverged += u64::from(!r.solve.converged);
@@ -57,6 +59,14 @@ fn cycle(mut s: TrackScenario, seed: u64) -> Cycle {
         deepest = deepest.max(r.max_penetration);
         for d in model.world.drives() {
             let f = d.impulse_v / s.simulation.dt;
+            if blocks.contains(&(d.body as usize)) {
+                // The lifting unit letting the block down, within its falling bound.
+                assert!(
+                    f.abs().max_element() <= lowering * (1.0 + 1e-9),
+                    "seed {seed}: block drive {f} N"
+                );
+                continue;
+            }
             assert!(
                 f.x.abs() <= limits[0] * (1.0 + 1e-9),
                 "seed {seed}: drive {f} N"
@@ -103,23 +113,26 @@ fn the_small_track_cycle_converges_and_compacts_under_the_block() {
             .collect();
         runs.into_iter().map(|r| r.join().unwrap()).collect()
     });
-    // Measured (with `solver.skip = 1`), packs 3–7: 77–184 of 4,700 steps unconverged
-    // (1.6–3.9 %), largest residuals 0.028–0.39 (one step of the lift, 0.39, in pack 7; before
+    // Measured (with `solver.skip = 1`), packs 3–7: 81–191 of 5,100 steps unconverged
+    // (1.6–3.7 %), largest residuals 0.043–0.39 (one step of the lift, 0.39, in pack 7; before
     // the edge contacts lying across a face got both their ends, 0.033–0.086, which is why the
     // bound is 0.5 rather than 0.25), largest overlaps 1.17–1.51 mm; compacity under the block
-    // −1.2 %, +4.1 %, +11.5 %, +12.8 %, +5.1 % (mean +6.5 %), the cribs loosening by
-    // 0.8–10 % (mean −5.1 %);
-    // the released block 0.4 mm below to 10.0 mm above its level before the 10 mm lift.
+    // −1.6 %, +3.0 %, +11.3 %, +12.7 %, +5.2 % (mean +6.1 %), the cribs loosening by
+    // 0.7–9.9 % (mean −4.9 %); the block, let down over 0.03 s and settled for 0.07 s more,
+    // −1.7, +5.4, +4.6, +9.2, +3.2 mm from its level before the 10 mm lift (it fell through the
+    // gap the tines left under it). Let go at once, it was launched (pack 4: +9.7 → +13.2 →
+    // +9.7 mm within the 0.06 s it then had), which is why the bound above was lift + 1 mm
+    // then and is the lift now.
     // Granular flow is chaotic, and a change that only reorders rounding moves such figures by
     // tens of percent: the bounds leave that margin.
     for c in &cycles {
         assert!(c.unconverged * 100 <= 7 * c.steps, "pack {}: {c:?}", c.seed);
         assert!(c.worst_residual <= 0.5, "pack {}: {c:?}", c.seed);
         assert!(c.deepest <= 2e-3, "pack {}: {c:?}", c.seed);
-        // Released, the block rests on the tamped ballast: not sunk below its level before
+        // Let down, the block rests on the tamped ballast: not sunk below its level before
         // the lift by more than a few millimetres, nor above the lift.
         assert!(
-            c.settled > -5e-3 && c.settled < lift + 1e-3,
+            c.settled > -5e-3 && c.settled < lift,
             "pack {}: {c:?}",
             c.seed
         );

@@ -95,7 +95,7 @@ struct Family {
     default_unit: &'static str,
 }
 
-const FAMILIES: [Family; 7] = [
+const FAMILIES: [Family; 8] = [
     Family {
         prefix: "compacity_",
         file: "compacity",
@@ -151,6 +151,14 @@ const FAMILIES: [Family; 7] = [
         quantity: "work",
         noun: "tine",
         default_unit: "J",
+    },
+    Family {
+        prefix: "block_drive_",
+        file: "block_drives",
+        title: "Force of the lifting unit on the blocks as it lets them down",
+        quantity: "drive force",
+        noun: "block",
+        default_unit: "N",
     },
 ];
 

@@ -29,6 +29,17 @@
 //! lost distance up at that speed at most, within its force limit, and ends where its program
 //! ends.
 //!
+//! # Gradual release
+//!
+//! `release_at` lets a driven body go: from then on it is dynamic. Let go at once, a body
+//! held against loaded contacts is launched by them (a block held at its lift over freshly
+//! squeezed ballast). With `release_over = T` the release is a machine lowering its load:
+//! from `release_at` the drive keeps the program's velocity with a bound that falls linearly
+//! from `release_force` to zero over `T`, the body's weight included (its drive no longer
+//! carries it for free), and the body is dynamic from `release_at + T`. The contacts take
+//! the load over as the bound falls, at a rate the drive sets, and the drive absorbs the
+//! energy they give back.
+//!
 //! # Attached bodies
 //!
 //! `attached_to = N` makes a body a rigid part of body N (a tine's shaft on its blade): it
@@ -250,6 +261,44 @@ pub struct Driver {
     /// program's velocity only.
     #[serde(default, skip_serializing_if = "is_zero3")]
     pub catch_up_speed: [f64; 3],
+    /// Duration (s) of a gradual release from `release_at` (see the module documentation);
+    /// 0: the body is let go at once.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub release_over: f64,
+    /// Force (N, per world axis) the drive can still exert at `release_at`, falling linearly
+    /// to zero over `release_over`; `inf`: that axis follows its program to the end of the
+    /// release.
+    #[serde(
+        default = "unlimited",
+        skip_serializing_if = "is_unlimited",
+        deserialize_with = "limits"
+    )]
+    pub release_force: [f64; 3],
+}
+
+/// The bounds a drive works under over one step: force (N) and torque (N·m) per world axis,
+/// `inf` where it follows its program whatever that takes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limits {
+    pub force: [f64; 3],
+    pub torque: [f64; 3],
+}
+
+impl Limits {
+    /// True when a translational bound is finite (the body has its mass in the solver).
+    pub fn translation(&self) -> bool {
+        !is_unlimited(&self.force)
+    }
+
+    /// True when a rotational bound is finite (the body has its inertia in the solver).
+    pub fn rotation(&self) -> bool {
+        !is_unlimited(&self.torque)
+    }
+
+    /// True when some degree of freedom is bounded.
+    pub fn any(&self) -> bool {
+        self.translation() || self.rotation()
+    }
 }
 
 impl Default for Driver {
@@ -268,6 +317,8 @@ impl Default for Driver {
             superposed: Velocities::default(),
             attached_to: None,
             catch_up_speed: [0.0; 3],
+            release_over: 0.0,
+            release_force: unlimited(),
         }
     }
 }
@@ -327,6 +378,10 @@ fn velocities_at(
 
 fn unlimited() -> [f64; 3] {
     [f64::INFINITY; 3]
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 fn is_zero3(x: &[f64; 3]) -> bool {
@@ -413,9 +468,36 @@ impl Driver {
         out
     }
 
-    /// True when the body is free (dynamic) at time `t`.
+    /// True when the body is free (dynamic) at time `t`: its release, gradual or not, is over.
     pub fn released(&self, t: f64) -> bool {
-        self.release_at.is_some_and(|r| t >= r)
+        self.release_at.is_some_and(|r| t >= r + self.release_over)
+    }
+
+    /// True while a gradual release is under way at time `t`.
+    pub fn releasing(&self, t: f64) -> bool {
+        self.release_at
+            .is_some_and(|r| t >= r && t < r + self.release_over)
+    }
+
+    /// The bounds of the step from `t0` to `t1`: `max_force` and `max_torque`, or during a
+    /// gradual release `release_force` scaled by the fraction of the release left at `t1`
+    /// (zero on its last step) and `max_torque`.
+    pub fn limits(&self, t0: f64, t1: f64) -> Limits {
+        match self.release_at {
+            Some(r) if self.releasing(t0) => {
+                let left = (1.0 - (t1 - r) / self.release_over).clamp(0.0, 1.0);
+                Limits {
+                    force: self
+                        .release_force
+                        .map(|f| if f.is_finite() { f * left } else { f }),
+                    torque: self.max_torque,
+                }
+            }
+            _ => Limits {
+                force: self.max_force,
+                torque: self.max_torque,
+            },
+        }
     }
 
     /// Checks every term; the error names the degree of freedom and the term index.
@@ -435,6 +517,33 @@ impl Driver {
                 )
                 .into());
             }
+        }
+        if !(self.release_over.is_finite() && self.release_over >= 0.0) {
+            return Err(format!(
+                "release_over = {} must be a finite duration ≥ 0 s (0: released at once)",
+                self.release_over
+            )
+            .into());
+        }
+        if self.release_over > 0.0 && self.release_at.is_none() {
+            return Err(format!(
+                "release_over = {} needs release_at: a gradual release starts at release_at",
+                self.release_over
+            )
+            .into());
+        }
+        let f = self.release_force;
+        if f.iter().any(|&x| x.is_nan() || x < 0.0) {
+            return Err(format!(
+                "release_force = {f:?} must hold three values ≥ 0 N (inf: no limit)"
+            )
+            .into());
+        }
+        if self.release_over == 0.0 && !is_unlimited(&f) {
+            return Err(format!(
+                "release_force = {f:?} needs release_over > 0 s: the force of a gradual release"
+            )
+            .into());
         }
         let c = self.catch_up_speed;
         if c.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
@@ -461,7 +570,9 @@ impl Driver {
                 || !self.superposed.is_empty()
                 || self.is_force_limited()
                 || !is_zero3(&self.catch_up_speed)
-                || self.release_at.is_some();
+                || self.release_at.is_some()
+                || self.release_over > 0.0
+                || !is_unlimited(&self.release_force);
             if moves {
                 return Err(format!(
                     "attached_to = {n}: an attached body moves with body {n} only (no \

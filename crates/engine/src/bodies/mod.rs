@@ -7,7 +7,7 @@
 
 pub mod driver;
 
-pub use driver::{Driver, Profile, Term, Velocities};
+pub use driver::{Driver, Limits, Profile, Term, Velocities};
 
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::shapes::{ConvexPolyhedron, PolyhedronBuild, Shape};
