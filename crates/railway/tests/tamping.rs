@@ -218,7 +218,7 @@ fn full_cycle_compacts_the_ballast_under_the_block() {
     // the lifted one. Measured on this bed's packs 3, 4, 5 and 7 (the test's seed; edge contacts
     // given both ends, BENCHMARKS.md session 27), let go at once: +15.5, +15.4, +14.9 and
     // +16.4 mm for the 15 mm lift, up to 1.4 mm above the lifted level; let down over half
-    // the lower phase (no launch), pack 7 +16.1 mm. Hence lift + 2 mm above.
+    // the lower phase, pack 7 +16.1 mm. Hence lift + 2 mm above.
     eprintln!(
         "released block {:+.2} mm from its level before the lift",
         (end[block_z] - z0) * 1e3
