@@ -429,17 +429,25 @@ impl Driver {
     /// True when a translational limit is finite: the drive's translation is solved with
     /// the contacts (the body has its mass), not imposed.
     pub fn limits_translation(&self) -> bool {
-        !is_unlimited(&self.max_force)
+        self.held_limits().translation()
     }
 
     /// True when a rotational limit is finite (the body has its inertia in the solver).
     pub fn limits_rotation(&self) -> bool {
-        !is_unlimited(&self.max_torque)
+        self.held_limits().rotation()
     }
 
     /// True when some degree of freedom is force-limited.
     pub fn is_force_limited(&self) -> bool {
-        self.limits_translation() || self.limits_rotation()
+        self.held_limits().any()
+    }
+
+    /// `max_force` and `max_torque`: the bounds outside a gradual release.
+    fn held_limits(&self) -> Limits {
+        Limits {
+            force: self.max_force,
+            torque: self.max_torque,
+        }
     }
 
     /// The sine terms that a time step `dt` samples too coarsely to follow: fewer than
@@ -493,10 +501,7 @@ impl Driver {
                     torque: self.max_torque,
                 }
             }
-            _ => Limits {
-                force: self.max_force,
-                torque: self.max_torque,
-            },
+            _ => self.held_limits(),
         }
     }
 
