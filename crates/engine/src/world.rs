@@ -633,6 +633,7 @@ impl World {
                     inv_inertia: b.inv_inertia_world(i),
                     epoch: 0,
                     drift: 0.0,
+                    version: 0,
                 }
             })
             .collect_into_vec(&mut self.scratch.solver_bodies);
@@ -972,5 +973,6 @@ fn limited_free_body(
         },
         epoch: 0,
         drift: 0.0,
+        version: 0,
     }
 }

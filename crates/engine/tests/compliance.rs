@@ -600,3 +600,56 @@ fn scenario_normal_law() {
         assert!(e.contains(field), "{bad}: {e}");
     }
 }
+
+/// Residual checks that read back the terms of contacts whose bodies were not written since
+/// the previous check (`solver.reuse_residual_terms`, on by default) change no bit: the same
+/// sweeps, residuals and stop decisions on every step, the same final state, monolithic and
+/// decomposed, with the default job's law (hyperbolic closure on the overlap, recovery,
+/// tangential springs, skipping sweeps) and with the plain rigid law.
+#[test]
+fn reused_residual_terms_change_no_bit() {
+    let ddm = DdmSettings {
+        subdomains: [2, 2, 1],
+        min_parallel_contacts: 1,
+        ..Default::default()
+    };
+    let compliant = |w: &mut World| {
+        w.settings.overlap_recovery = 0.2;
+        w.settings.tangential_stiffness = Some(5e6);
+        w.settings.solver.skip = 1.0;
+        w.settings.max_closure = Some(1e-4);
+        w.settings.normal_law = NormalLaw::Overlap;
+    };
+    for (label, stiffness, decomposed) in [
+        ("compliant, monolithic", Some(1e7), false),
+        ("compliant, DDM 2x2x1", Some(1e7), true),
+        ("rigid, DDM 2x2x1", None, true),
+    ] {
+        let trace = |reuse: bool| {
+            let mut w = pile(stiffness, decomposed.then(|| ddm.clone()));
+            if stiffness.is_some() {
+                compliant(&mut w);
+            }
+            w.settings.solver.reuse_residual_terms = reuse;
+            let reports: Vec<_> = (0..1200).map(|_| w.step().solve).collect();
+            (reports, state_digest(&w.bodies))
+        };
+        let (fresh, fresh_digest) = trace(false);
+        let (reused, reused_digest) = trace(true);
+        let sweeps: usize = fresh.iter().map(|r| r.iterations).sum();
+        assert!(
+            sweeps > 3 * fresh.len(),
+            "{label}: {sweeps} sweeps in 1,200 steps"
+        );
+        for (k, (a, b)) in fresh.iter().zip(&reused).enumerate() {
+            assert_eq!(a.iterations, b.iterations, "{label}, step {k}");
+            assert_eq!(
+                a.residual.to_bits(),
+                b.residual.to_bits(),
+                "{label}, step {k}"
+            );
+            assert_eq!(a, b, "{label}, step {k}");
+        }
+        assert_eq!(fresh_digest, reused_digest, "{label}");
+    }
+}

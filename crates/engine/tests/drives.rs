@@ -260,12 +260,24 @@ fn stirred_pile(ddm: Option<[usize; 3]>, limit: f64) -> World {
 }
 
 fn run_on(threads: usize, ddm: Option<[usize; 3]>, limit: f64, steps: usize) -> (String, f64) {
+    run_with(threads, ddm, limit, steps, true)
+}
+
+/// [`run_on`], residual terms reused (`solver.reuse_residual_terms`) or not.
+fn run_with(
+    threads: usize,
+    ddm: Option<[usize; 3]>,
+    limit: f64,
+    steps: usize,
+    reuse: bool,
+) -> (String, f64) {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap();
     pool.install(|| {
         let mut w = stirred_pile(ddm, limit);
+        w.settings.solver.reuse_residual_terms = reuse;
         let mut peak: f64 = 0.0;
         for _ in 0..steps {
             w.step();
@@ -292,6 +304,18 @@ fn force_limited_runs_do_not_depend_on_threads() {
     let (ddm1, _) = run_on(1, Some([2, 2, 1]), limit, steps);
     let (ddm2, _) = run_on(2, Some([2, 2, 1]), limit, steps);
     assert_eq!(ddm1, ddm2, "DDM 2x2x1, 1 vs 2 threads");
+    // The drive rows write their body every pass: residual terms read back across them
+    // change nothing.
+    assert_eq!(
+        mono1,
+        run_with(2, None, limit, steps, false).0,
+        "monolithic"
+    );
+    assert_eq!(
+        ddm1,
+        run_with(2, Some([2, 2, 1]), limit, steps, false).0,
+        "DDM"
+    );
 }
 
 /// A drive whose limits are all infinite is the kinematic body, bit for bit, and a driver

@@ -217,6 +217,7 @@ mod tests {
             inv_inertia: DMat3::IDENTITY * 6.0 * inv_mass,
             epoch: 0,
             drift: 0.0,
+            version: 0,
         };
         let bodies = vec![body(0.0), body(1.0), body(1.0)];
         let contact = |a, b, gap| contact_along_x(&bodies, a, b, gap, 0.0);

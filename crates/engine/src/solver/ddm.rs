@@ -26,7 +26,7 @@
 use super::correction::{self, CorrectionSettings, Overlap};
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
-use super::nlgs::{Nlgs, SolveReport, SweepSums};
+use super::nlgs::{Nlgs, SolveReport, SweepSums, TermCache};
 use super::partition::{Balance, Partition, STATIC};
 use super::StopRule;
 use crate::laws::{ContactStatus, Elastic};
@@ -143,6 +143,8 @@ pub struct Bucket {
     pub status: Vec<ContactStatus>,
     /// The overlapping contacts of the position correction (indices into `locals`).
     pub overlaps: Vec<Overlap>,
+    /// The residual terms of the current solve (empty until its first check).
+    terms: Vec<TermCache>,
 }
 
 impl Bucket {
@@ -156,6 +158,7 @@ impl Bucket {
         self.locals.clear();
         self.origin.clear();
         self.status.clear();
+        self.terms.clear();
     }
 
     /// Number of contacts.
@@ -299,6 +302,13 @@ impl DdmProblem {
     /// The buckets in the equivalent order: subdomains, then Γ by colour and group.
     fn buckets(&self) -> impl Iterator<Item = &Bucket> {
         self.sub.iter().chain(self.groups.iter().map(|g| &g.bucket))
+    }
+
+    /// [`Self::buckets`], mutably.
+    fn buckets_mut(&mut self) -> impl Iterator<Item = &mut Bucket> {
+        self.sub
+            .iter_mut()
+            .chain(self.groups.iter_mut().map(|g| &mut g.bucket))
     }
 
     /// Caller's contact indices in the order of the equivalent monolithic NLGS: subdomain 0's
@@ -778,17 +788,25 @@ fn correct(
 /// partial sum shows that it exceeds `bound` (the sums are non-negative).
 fn residual_within(
     nlgs: &Nlgs,
-    p: &DdmProblem,
+    p: &mut DdmProblem,
     dr: &[DriveRows],
     pb: &[SolverBody],
     q: f64,
     bound: f64,
 ) -> Option<f64> {
     let limit = super::exceeding_sum(bound, q);
-    let buckets: Vec<&Bucket> = p.buckets().collect();
+    let reuse = nlgs.settings.reuse_residual_terms;
+    let buckets: Vec<&mut Bucket> = p.buckets_mut().collect();
     let sums: Vec<Option<f64>> = buckets
-        .par_iter()
-        .map(|b| nlgs.residual_sum_within(&b.locals, pb, limit))
+        .into_par_iter()
+        .map(|b| {
+            if reuse && b.terms.len() != b.locals.len() {
+                b.terms.clear();
+                b.terms.resize(b.locals.len(), TermCache::EMPTY);
+            }
+            let cache = reuse.then_some(b.terms.as_mut_slice());
+            nlgs.residual_sum_within(&b.locals, pb, limit, cache)
+        })
         .collect();
     let mut sum = 0.0;
     for s in sums {

@@ -25,6 +25,10 @@ pub struct SolverBody {
     pub epoch: u32,
     /// Velocity change (m/s, at the contact points) accumulated since `epoch` last moved.
     pub drift: f32,
+    /// Counts every write of this body's velocities within a solve (exact, unlike `epoch`):
+    /// a residual term computed at the same versions of its two bodies is still exact (see
+    /// [`super::nlgs::TermCache`]).
+    pub version: u32,
 }
 
 /// One contact's local problem.
@@ -120,11 +124,13 @@ impl LocalProblem {
             let b1 = b.body_mut(self.body1);
             b1.v -= p * b1.inv_mass;
             b1.w -= b1.inv_inertia * self.r1.cross(p);
+            b1.version = b1.version.wrapping_add(1);
         }
         if self.dynamic2 {
             let b2 = b.body_mut(self.body2);
             b2.v += p * b2.inv_mass;
             b2.w += b2.inv_inertia * self.r2.cross(p);
+            b2.version = b2.version.wrapping_add(1);
         }
     }
 
@@ -135,6 +141,7 @@ impl LocalProblem {
         let [n, t, s] = self.frame3();
         let p = n * dr.x + t * dr.y + s * dr.z;
         let track = |bd: &mut SolverBody, dv: DVec3, dw: DVec3, arm: DVec3| {
+            bd.version = bd.version.wrapping_add(1);
             bd.drift +=
                 (dv.abs().max_element() + dw.abs().max_element() * arm.abs().max_element()) as f32;
             if bd.drift > eps {

@@ -54,6 +54,8 @@ impl DriveRows {
     #[inline]
     pub fn update<B: BodyAccess + ?Sized>(&mut self, v: &mut B, sums: &mut SweepSums) {
         let b = v.body_mut(self.body);
+        // Every pass writes the velocities (if only by adding zero).
+        b.version = b.version.wrapping_add(1);
         if self.translate {
             let m_inv = b.inv_mass;
             for d in 0..3 {
@@ -153,4 +155,41 @@ pub(crate) fn residual_sum<B: BodyAccess + ?Sized>(drives: &[DriveRows], v: &B) 
 /// `Σ scale²` over the drives.
 pub fn scale_sum<B: BodyAccess + ?Sized>(drives: &[DriveRows], v: &B) -> f64 {
     drives.iter().map(|d| d.scale2(v)).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::DMat3;
+    use crate::solver::SolverBody;
+
+    /// A pass writes its body's velocities and moves its version, so that a contact's
+    /// residual term computed before the pass is not read back after it
+    /// (see [`crate::solver::SolverSettings::reuse_residual_terms`]).
+    #[test]
+    fn a_pass_moves_the_bodys_version() {
+        let mut bodies = [SolverBody {
+            v: DVec3::new(0.2, 0.0, 0.0),
+            w: DVec3::ZERO,
+            inv_mass: 0.5,
+            inv_inertia: DMat3::IDENTITY,
+            epoch: 0,
+            drift: 0.0,
+            version: 7,
+        }];
+        let mut d = DriveRows {
+            body: 0,
+            target_v: DVec3::new(0.5, 0.0, 0.0),
+            target_w: DVec3::ZERO,
+            bound_v: DVec3::splat(f64::INFINITY),
+            bound_w: DVec3::ZERO,
+            impulse_v: DVec3::ZERO,
+            impulse_w: DVec3::ZERO,
+            translate: true,
+            rotate: false,
+        };
+        sweep(std::slice::from_mut(&mut d), &mut bodies[..]);
+        assert_eq!(bodies[0].v.x, 0.5);
+        assert_ne!(bodies[0].version, 7);
+    }
 }

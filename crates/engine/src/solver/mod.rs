@@ -96,6 +96,17 @@ pub struct SolverSettings {
     /// natural-map tolerance stops the solve (`residual_tolerance = inf` with the Quad norm).
     #[serde(skip_serializing_if = "is_zero")]
     pub skip: f64,
+    /// Whether a residual check reads back the terms of the contacts whose bodies were not
+    /// written since the previous check instead of recomputing them (on by default). The
+    /// results are the same bit for bit either way; off, every check computes every term
+    /// (the reference the equivalence tests compare with).
+    #[serde(skip_serializing_if = "is_true")]
+    pub reuse_residual_terms: bool,
+}
+
+/// Left out of the settings' JSON at its default (see [`is_zero`]).
+fn is_true(x: &bool) -> bool {
+    *x
 }
 
 /// Left out of the settings' JSON when off, so that scenarios, checkpoints and cache keys
@@ -116,6 +127,7 @@ impl Default for SolverSettings {
             residual_tolerance: DEFAULT_RESIDUAL_TOLERANCE,
             symmetric: false,
             skip: 0.0,
+            reuse_residual_terms: true,
         }
     }
 }

@@ -124,6 +124,50 @@ pub(crate) fn skip_threshold(s: &SolverSettings, q: f64, rows: usize) -> f64 {
     }
 }
 
+/// A contact's natural-map residual term as last computed, with its bodies'
+/// [`SolverBody::version`]s then.
+///
+/// Between two residual checks most contacts of a large bed are untouched by the sweep in
+/// between (skipped, or solved with no change), and the check is mostly arithmetic (square
+/// roots, divisions): reading the term back costs what a skipped contact costs. A term depends
+/// on the contact's impulse and its bodies' velocities (the rest of its local problem is fixed
+/// within a solve); its impulse changes only with an increment applied to its bodies, which
+/// writes a dynamic body and so moves its version. A contact with no dynamic body is
+/// recomputed every time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct TermCache {
+    value: f64,
+    versions: [u32; 2],
+}
+
+impl TermCache {
+    /// No term yet (a solve starts with every contact's cache empty).
+    pub(crate) const EMPTY: TermCache = TermCache {
+        value: f64::NAN,
+        versions: [0; 2],
+    };
+
+    /// The term of contact `c`: read back when its bodies' versions are those it was computed
+    /// at, else `compute(c)` (and remembered).
+    #[inline(always)]
+    fn term<B: BodyAccess + ?Sized>(
+        &mut self,
+        c: &LocalProblem,
+        v: &B,
+        compute: impl FnOnce(&LocalProblem) -> f64,
+    ) -> f64 {
+        let versions = [v.body(c.body1).version, v.body(c.body2).version];
+        if versions == self.versions && !self.value.is_nan() {
+            return self.value;
+        }
+        let value = compute(c);
+        if c.dynamic1 || c.dynamic2 {
+            *self = TermCache { value, versions };
+        }
+        value
+    }
+}
+
 /// Every this many sweeps, a solve that skips updates every contact: skipping can then slow
 /// Gauss-Seidel by at most this factor, never stall it short of the tolerance.
 const FULL_SWEEP_EVERY: usize = 8;
@@ -390,17 +434,33 @@ impl Nlgs {
 
     /// `Σ_α ‖residual_α‖²` over `locals` (see [`ConvergenceNorm::NaturalMap`]), or `None` once
     /// the partial sum exceeds `limit` (the terms are non-negative: the whole sum would too).
+    /// With a `cache` (one entry per contact, see [`TermCache`]) a term whose bodies have not
+    /// been written since it was computed is read back instead: the same value, so the same
+    /// sum bit for bit.
     pub(crate) fn residual_sum_within<B: BodyAccess + ?Sized>(
         &self,
         locals: &[LocalProblem],
         v: &B,
         limit: f64,
+        cache: Option<&mut [TermCache]>,
     ) -> Option<f64> {
         let mut sum = 0.0;
-        for c in locals {
-            sum += self.residual2(c, v);
-            if sum > limit {
-                return None;
+        match cache {
+            Some(cache) if cache.len() == locals.len() => {
+                for (c, t) in locals.iter().zip(cache) {
+                    sum += t.term(c, v, |c| self.residual2(c, v));
+                    if sum > limit {
+                        return None;
+                    }
+                }
+            }
+            _ => {
+                for c in locals {
+                    sum += self.residual2(c, v);
+                    if sum > limit {
+                        return None;
+                    }
+                }
             }
         }
         Some(sum)
@@ -440,6 +500,7 @@ impl Nlgs {
         }
         let s = &self.settings;
         let mut stop = StopRule::new();
+        let mut cache = Vec::new();
         for k in 1..=s.max_iterations {
             this.for_sweep(k, drift);
             let mut sums = this.sweep_k(k, locals, v, status);
@@ -447,14 +508,18 @@ impl Nlgs {
             report.iterations = k;
             report.quad = sums.quad();
             if stop.converged(s, k, report.quad, |bound| {
-                self.natural_residual_within(locals, drives, v, q, bound)
+                if s.reuse_residual_terms && cache.is_empty() {
+                    cache.resize(locals.len(), TermCache::EMPTY);
+                }
+                self.natural_residual_within(locals, drives, v, q, bound, Some(&mut cache))
             }) {
                 report.converged = true;
                 break;
             }
         }
         report.residual = stop.final_residual(report.iterations, || {
-            self.natural_residual(locals, drives, v, q)
+            self.natural_residual_within(locals, drives, v, q, f64::INFINITY, Some(&mut cache))
+                .unwrap_or(f64::INFINITY)
         });
         report
     }
@@ -468,8 +533,9 @@ impl Nlgs {
         v: &[SolverBody],
         q: f64,
         bound: f64,
+        cache: Option<&mut [TermCache]>,
     ) -> Option<f64> {
-        let sum = self.residual_sum_within(locals, v, super::exceeding_sum(bound, q))?;
+        let sum = self.residual_sum_within(locals, v, super::exceeding_sum(bound, q), cache)?;
         Some((sum + drive::residual_sum(drives, v)).sqrt() / q)
     }
 
@@ -482,7 +548,7 @@ impl Nlgs {
         q: f64,
     ) -> f64 {
         // Never `None` without a bound.
-        self.natural_residual_within(locals, drives, v, q, f64::INFINITY)
+        self.natural_residual_within(locals, drives, v, q, f64::INFINITY, None)
             .unwrap_or(f64::INFINITY)
     }
 }
@@ -503,6 +569,7 @@ mod tests {
             inv_inertia: DMat3::IDENTITY * 6.0 * inv_mass,
             epoch: 0,
             drift: 0.0,
+            version: 0,
         };
         let bodies = vec![
             body(0.0, 0.0),
@@ -514,11 +581,8 @@ mod tests {
         (vec![contact(0, 1), contact(1, 2), contact(2, 3)], bodies)
     }
 
-    /// The bounded sum is the full sum, term for term, unless a partial sum passes the limit.
-    #[test]
-    fn bounded_residual_sum_is_the_full_sum_or_proves_it_larger() {
-        let (locals, bodies) = row();
-        let nlgs = Nlgs {
+    fn rigid_nlgs() -> Nlgs {
+        Nlgs {
             settings: SolverSettings::default(),
             h_theta: 5e-4,
             compliance: 0.0,
@@ -530,7 +594,14 @@ mod tests {
             closure_impulse: 0.0,
             skip_drift: 0.0,
             skip_now: false,
-        };
+        }
+    }
+
+    /// The bounded sum is the full sum, term for term, unless a partial sum passes the limit.
+    #[test]
+    fn bounded_residual_sum_is_the_full_sum_or_proves_it_larger() {
+        let (locals, bodies) = row();
+        let nlgs = rigid_nlgs();
         let terms: Vec<f64> = locals
             .iter()
             .map(|c| nlgs.residual2(c, &bodies[..]))
@@ -538,32 +609,75 @@ mod tests {
         assert!(terms.iter().all(|&t| t > 0.0), "{terms:?}");
         let full = terms.iter().fold(0.0, |s, &t| s + t);
         assert_eq!(
-            nlgs.residual_sum_within(&locals, &bodies[..], f64::INFINITY),
+            nlgs.residual_sum_within(&locals, &bodies[..], f64::INFINITY, None),
             Some(full)
         );
         assert_eq!(
-            nlgs.residual_sum_within(&locals, &bodies[..], full),
+            nlgs.residual_sum_within(&locals, &bodies[..], full, None),
             Some(full)
         );
         // Past the first term's share: it stops there.
         assert_eq!(
-            nlgs.residual_sum_within(&locals, &bodies[..], 0.5 * terms[0]),
+            nlgs.residual_sum_within(&locals, &bodies[..], 0.5 * terms[0], None),
             None
         );
         assert_eq!(
-            nlgs.residual_sum_within(&locals, &bodies[..], full * (1.0 - 1e-12)),
+            nlgs.residual_sum_within(&locals, &bodies[..], full * (1.0 - 1e-12), None),
             None
         );
         // The relative residual: the same value as the full evaluation, or None past the bound.
         let q = 0.7;
         let r = nlgs.natural_residual(&locals, &[], &bodies, q);
         assert_eq!(
-            nlgs.natural_residual_within(&locals, &[], &bodies, q, r),
+            nlgs.natural_residual_within(&locals, &[], &bodies, q, r, None),
             Some(r)
         );
         assert_eq!(
-            nlgs.natural_residual_within(&locals, &[], &bodies, q, 0.5 * r),
+            nlgs.natural_residual_within(&locals, &[], &bodies, q, 0.5 * r, None),
             None
+        );
+    }
+
+    /// A residual check reads back the terms whose bodies' versions did not move, and only
+    /// those: after each sweep the sum with the cache equals the full sum bit for bit; a body
+    /// written behind the versions' back shows that the read-back happens, and moving its
+    /// version brings the term up to date.
+    #[test]
+    fn cached_residual_terms_follow_the_bodies_versions() {
+        let (mut locals, mut bodies) = row();
+        let nlgs = rigid_nlgs();
+        let mut cache = vec![TermCache::EMPTY; locals.len()];
+        let mut status = vec![ContactStatus::NoContact; locals.len()];
+        for sweep in 0..6 {
+            let full = nlgs.residual_sum_within(&locals, &bodies[..], f64::INFINITY, None);
+            let cached =
+                nlgs.residual_sum_within(&locals, &bodies[..], f64::INFINITY, Some(&mut cache));
+            assert_eq!(
+                full.map(f64::to_bits),
+                cached.map(f64::to_bits),
+                "sweep {sweep}"
+            );
+            nlgs.sweep(&mut locals, &mut bodies[..], &mut status);
+        }
+        let sum = |cache: &mut [TermCache], bodies: &[SolverBody]| {
+            nlgs.residual_sum_within(&locals, bodies, f64::INFINITY, Some(cache))
+                .unwrap()
+        };
+        let before = sum(&mut cache, &bodies);
+        // Body 3 (only in the last contact) pushed away without its version moving: the
+        // stale term is read back.
+        bodies[3].v.x -= 1.0;
+        assert_eq!(sum(&mut cache, &bodies), before);
+        let full = nlgs
+            .residual_sum_within(&locals, &bodies[..], f64::INFINITY, None)
+            .unwrap();
+        assert_ne!(full, before);
+        bodies[3].version += 1;
+        assert_eq!(sum(&mut cache, &bodies), full);
+        // Too short a cache is ignored rather than misread.
+        assert_eq!(
+            nlgs.residual_sum_within(&locals, &bodies[..], f64::INFINITY, Some(&mut cache[..1])),
+            Some(full)
         );
     }
 }
