@@ -210,8 +210,14 @@ def test_ctrl_c_stops_a_run_after_the_step(tmp_path):
         if k == 30:
             os.kill(os.getpid(), signal.SIGINT)
 
-    with pytest.raises(KeyboardInterrupt, match="interrupted at step 30 of 100"):
-        sim.run(tmp_path / "run", steps=100, progress=ctrl_c, every=10, quiet=True)
+    # Python's own Ctrl-C handler, whatever the suite was started under: a shell starts a
+    # background job with SIGINT ignored, and Python then keeps it ignored.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt, match="interrupted at step 30 of 100"):
+            sim.run(tmp_path / "run", steps=100, progress=ctrl_c, every=10, quiet=True)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     s = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert s["status"] == "interrupted" and s["steps"] == 30 and sim.step_index == 30
 
