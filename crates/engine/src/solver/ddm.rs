@@ -800,11 +800,7 @@ fn residual_within(
     let sums: Vec<Option<f64>> = buckets
         .into_par_iter()
         .map(|b| {
-            if reuse && b.terms.len() != b.locals.len() {
-                b.terms.clear();
-                b.terms.resize(b.locals.len(), TermCache::EMPTY);
-            }
-            let cache = reuse.then_some(b.terms.as_mut_slice());
+            let cache = TermCache::ready(&mut b.terms, b.locals.len(), reuse);
             nlgs.residual_sum_within(&b.locals, pb, limit, cache)
         })
         .collect();

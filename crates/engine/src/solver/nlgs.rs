@@ -147,6 +147,22 @@ impl TermCache {
         versions: [0; 2],
     };
 
+    /// `cache` sized for `n` contacts (emptied when it was not), or `None` when `reuse` is off.
+    pub(crate) fn ready(
+        cache: &mut Vec<TermCache>,
+        n: usize,
+        reuse: bool,
+    ) -> Option<&mut [TermCache]> {
+        if !reuse {
+            return None;
+        }
+        if cache.len() != n {
+            cache.clear();
+            cache.resize(n, TermCache::EMPTY);
+        }
+        Some(cache.as_mut_slice())
+    }
+
     /// The term of contact `c`: read back when its bodies' versions are those it was computed
     /// at, else `compute(c)` (and remembered).
     #[inline(always)]
@@ -166,6 +182,19 @@ impl TermCache {
         }
         value
     }
+}
+
+/// The sum of `terms` in order, or `None` once a partial sum exceeds `limit`.
+#[inline(always)]
+fn bounded_sum(terms: impl Iterator<Item = f64>, limit: f64) -> Option<f64> {
+    let mut sum = 0.0;
+    for t in terms {
+        sum += t;
+        if sum > limit {
+            return None;
+        }
+    }
+    Some(sum)
 }
 
 /// Every this many sweeps, a solve that skips updates every contact: skipping can then slow
@@ -444,26 +473,16 @@ impl Nlgs {
         limit: f64,
         cache: Option<&mut [TermCache]>,
     ) -> Option<f64> {
-        let mut sum = 0.0;
         match cache {
-            Some(cache) if cache.len() == locals.len() => {
-                for (c, t) in locals.iter().zip(cache) {
-                    sum += t.term(c, v, |c| self.residual2(c, v));
-                    if sum > limit {
-                        return None;
-                    }
-                }
-            }
-            _ => {
-                for c in locals {
-                    sum += self.residual2(c, v);
-                    if sum > limit {
-                        return None;
-                    }
-                }
-            }
+            Some(cache) if cache.len() == locals.len() => bounded_sum(
+                locals
+                    .iter()
+                    .zip(cache)
+                    .map(|(c, t)| t.term(c, v, |c| self.residual2(c, v))),
+                limit,
+            ),
+            _ => bounded_sum(locals.iter().map(|c| self.residual2(c, v)), limit),
         }
-        Some(sum)
     }
 
     /// Solves the problem with all contacts in their stored order. `v` holds `V_free` on entry
@@ -508,17 +527,16 @@ impl Nlgs {
             report.iterations = k;
             report.quad = sums.quad();
             if stop.converged(s, k, report.quad, |bound| {
-                if s.reuse_residual_terms && cache.is_empty() {
-                    cache.resize(locals.len(), TermCache::EMPTY);
-                }
-                self.natural_residual_within(locals, drives, v, q, bound, Some(&mut cache))
+                let terms = TermCache::ready(&mut cache, locals.len(), s.reuse_residual_terms);
+                self.natural_residual_within(locals, drives, v, q, bound, terms)
             }) {
                 report.converged = true;
                 break;
             }
         }
         report.residual = stop.final_residual(report.iterations, || {
-            self.natural_residual_within(locals, drives, v, q, f64::INFINITY, Some(&mut cache))
+            let terms = TermCache::ready(&mut cache, locals.len(), s.reuse_residual_terms);
+            self.natural_residual_within(locals, drives, v, q, f64::INFINITY, terms)
                 .unwrap_or(f64::INFINITY)
         });
         report
