@@ -4,6 +4,8 @@ mod bench;
 mod interrupt;
 mod paper;
 mod progress;
+#[cfg(feature = "mpi")]
+mod ranks;
 mod scaling;
 
 use ballast_run::{Failure, Observer};
@@ -285,11 +287,43 @@ fn main() -> ExitCode {
         } => set_threads(threads)
             .map_err(Failure::Error)
             .and_then(|threads| {
-                let mut observer = Terminal {
-                    quiet,
+                // Launched by `mpirun -np K` (K > 1): this process is one rank of the run.
+                #[cfg(feature = "mpi")]
+                let universe =
+                    mpi::initialize_with_threading(mpi::Threading::Funneled).map(|(u, _)| u);
+                #[cfg(feature = "mpi")]
+                let ranks = universe
+                    .as_ref()
+                    .map(|u| std::sync::Arc::new(ranks::MpiRanks::new(u)))
+                    .filter(|r| ballast_engine::solver::Exchange::size(&**r) > 1);
+                #[cfg(feature = "mpi")]
+                let rank = ranks
+                    .as_ref()
+                    .map_or(0, |r| ballast_engine::solver::Exchange::rank(&**r));
+                #[cfg(not(feature = "mpi"))]
+                let rank = 0;
+                let mut terminal = Terminal {
+                    quiet: quiet || rank != 0,
                     progress: None,
                 };
-                ballast_run::run(
+                #[cfg(feature = "mpi")]
+                let run_ranks = ranks.clone().map(ranks::RunRanks);
+                #[cfg(feature = "mpi")]
+                let mut agreed;
+                #[cfg(feature = "mpi")]
+                let observer: &mut dyn Observer = match &ranks {
+                    Some(r) => {
+                        agreed = ranks::Agreed {
+                            inner: &mut terminal,
+                            ranks: r,
+                        };
+                        &mut agreed
+                    }
+                    None => &mut terminal,
+                };
+                #[cfg(not(feature = "mpi"))]
+                let observer: &mut dyn Observer = &mut terminal;
+                let result = ballast_run::run(
                     &ballast_run::RunArgs {
                         file: file.as_deref(),
                         preset: preset.as_deref(),
@@ -304,11 +338,23 @@ fn main() -> ExitCode {
                         steps,
                         threads,
                         subdomains,
-                        quiet,
+                        quiet: quiet || rank != 0,
+                        #[cfg(feature = "mpi")]
+                        ranks: run_ranks.as_ref().map(|r| r as &dyn ballast_run::Ranks),
+                        #[cfg(not(feature = "mpi"))]
+                        ranks: None,
                     },
-                    &mut observer,
+                    observer,
                 )
-                .map(|_| ())
+                .map(|_| ());
+                // A rank that fails alone (a write error on rank 0) ends the whole job: the
+                // others would wait for it forever. A divergence or a stop is every rank's.
+                #[cfg(feature = "mpi")]
+                if let (Err(Failure::Error(e) | Failure::Io(e)), Some(r)) = (&result, &ranks) {
+                    eprintln!("error: rank {rank}: {}", cut_lines(e));
+                    r.abort(1);
+                }
+                result
             }),
         Command::Bench {
             json,

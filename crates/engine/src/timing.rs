@@ -14,6 +14,9 @@ pub struct PhaseTimes {
     pub subdomains: f64,
     /// Of `nlgs`: interface sweeps (domain decomposition only).
     pub interface: f64,
+    /// Of `nlgs`: sharing between the ranks of a distributed run (MPI; 0 in one process).
+    #[serde(default)]
+    pub communication: f64,
     /// Free velocities, kinematic drivers, position/orientation update.
     pub other: f64,
     /// Whole step.
@@ -26,6 +29,7 @@ impl std::ops::AddAssign for PhaseTimes {
         self.nlgs += o.nlgs;
         self.subdomains += o.subdomains;
         self.interface += o.interface;
+        self.communication += o.communication;
         self.other += o.other;
         self.total += o.total;
     }
@@ -40,6 +44,7 @@ impl std::ops::Sub for PhaseTimes {
             nlgs: self.nlgs - o.nlgs,
             subdomains: self.subdomains - o.subdomains,
             interface: self.interface - o.interface,
+            communication: self.communication - o.communication,
             other: self.other - o.other,
             total: self.total - o.total,
         }

@@ -18,6 +18,7 @@ use crate::laws::{default_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::build_local_problems;
+use crate::solver::Exchange;
 use crate::solver::{
     ddm, CorrectionSettings, DdmSettings, DriveRows, LocalProblem, Nlgs, Partition, SolveReport,
     SolverBody, SolverSettings,
@@ -25,6 +26,7 @@ use crate::solver::{
 use crate::timing::{Lap, PhaseTimes};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// Time-stepping settings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -295,6 +297,9 @@ pub struct World {
     /// The force-limited drives of the last step: rebuilt by every step, kept as its result
     /// (their impulses are the machine's forces).
     drives: Vec<DriveRows>,
+    /// The ranks this world's DDM solves are shared with, in a run distributed over processes
+    /// (see [`crate::solver::exchange`]); `None`: it solves alone.
+    exchange: Option<Arc<dyn Exchange>>,
     /// The step pipeline's buffers: nothing in them carries over from one step to the next
     /// (see [`World::release_scratch`]).
     scratch: Scratch,
@@ -347,6 +352,7 @@ impl World {
             drive_work: Vec::new(),
             drive_lag: Vec::new(),
             drives: Vec::new(),
+            exchange: None,
             scratch: Scratch::default(),
         }
         .with_attached_velocities()
@@ -528,6 +534,14 @@ impl World {
     /// Whether [`World::detect`] has prepared the next step.
     pub fn is_detected(&self) -> bool {
         self.scratch.pending.is_some()
+    }
+
+    /// Shares this world's domain-decomposed solves with other ranks, each holding the same
+    /// scene and stepping it in lockstep (see [`crate::solver::exchange`]); `None`: solves
+    /// alone. Results are bit-identical either way; a monolithic solve (no `[ddm]`) runs whole
+    /// on every rank.
+    pub fn set_exchange(&mut self, exchange: Option<Arc<dyn Exchange>>) {
+        self.exchange = exchange;
     }
 
     /// Frees the step pipeline's buffers (local problems, solver bodies, detection output,
@@ -736,6 +750,7 @@ impl World {
             }
             Some(d) => {
                 let partition = self.partition(d);
+                self.scratch.ddm_workspace.exchange = self.exchange.clone();
                 let (report, t, corrected) = ddm::solve_and_correct(
                     &mut self.scratch.ddm_workspace,
                     &nlgs,
@@ -754,6 +769,7 @@ impl World {
                 );
                 times.subdomains = t.subdomains;
                 times.interface = t.interface;
+                times.communication = t.communication;
                 (report, corrected)
             }
         };

@@ -22,5 +22,6 @@ pub mod report;
 mod run;
 
 pub use run::{
-    run, ArgNames, BuildOptions, Failure, Job, Observer, Plain, RunArgs, RunOptions, RunOutcome,
+    run, ArgNames, BuildOptions, Failure, Job, Observer, Plain, Ranks, RunArgs, RunOptions,
+    RunOutcome,
 };

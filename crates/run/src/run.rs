@@ -167,6 +167,20 @@ pub struct RunArgs<'a> {
     pub quiet: bool,
     /// Folder of prepared ballast beds; `None`: no cache.
     pub cache: Option<PathBuf>,
+    /// The processes of a run distributed over ranks (MPI); `None`: one process.
+    pub ranks: Option<&'a dyn Ranks>,
+}
+
+/// The processes of a run distributed over ranks, as a front end provides them (the command
+/// line's over MPI). Every rank builds the same scene and steps it in lockstep, sharing its
+/// domain-decomposed solves ([`ballast_engine::solver::exchange`]); rank 0 writes the run
+/// folder, the others follow ([`Job::follow`]). The observer of each rank must agree with the
+/// others on [`Observer::stop_requested`].
+pub trait Ranks {
+    /// The solves' collective.
+    fn exchange(&self) -> std::sync::Arc<dyn ballast_engine::solver::Exchange>;
+    /// Returns once every rank has called it.
+    fn barrier(&self);
 }
 
 /// How [`Job::build`] builds a scene.
@@ -384,36 +398,49 @@ fn scenario_text(a: &RunArgs) -> Result<(String, String), String> {
 /// naming the command's options.
 pub fn run(a: &RunArgs, observer: &mut dyn Observer) -> Result<RunOutcome, Failure> {
     let names = &ArgNames::CLI;
-    if !a.resume {
+    let exchange = a.ranks.map(|r| r.exchange()).filter(|e| e.size() > 1);
+    let writer = exchange.as_ref().is_none_or(|e| e.rank() == 0);
+    if !a.resume && writer {
         // Before the bed is prepared (minutes): a refusal should come at once.
         if !a.overwrite && !previous_run(a.out).is_empty() {
             claim_folder(a.out, false, names)?;
         }
     }
     let (source, text) = scenario_text(a)?;
+    // Rank 0 prepares the bed (and caches it) before the others read it from the cache.
+    let ranks = a.ranks.filter(|_| exchange.is_some());
+    if let (Some(r), false) = (ranks, writer) {
+        r.barrier();
+    }
     let mut job = Job::build(
         &source,
         &text,
         &BuildOptions {
             cache: a.cache.as_deref(),
             subdomains: a.subdomains,
-            quiet: a.quiet,
+            quiet: a.quiet || !writer,
             names,
         },
         observer,
     )?;
-    job.run(
-        &RunOptions {
-            out: a.out,
-            resume: a.resume,
-            overwrite: a.overwrite,
-            steps: a.steps,
-            threads: a.threads,
-            quiet: a.quiet,
-            names,
-        },
-        observer,
-    )
+    if let (Some(r), true) = (ranks, writer) {
+        r.barrier();
+    }
+    job.world_mut().set_exchange(exchange);
+    let options = RunOptions {
+        out: a.out,
+        resume: a.resume,
+        overwrite: a.overwrite,
+        steps: a.steps,
+        threads: a.threads,
+        quiet: a.quiet || !writer,
+        names,
+    };
+    if writer {
+        job.run(&options, observer)
+    } else {
+        job.follow(&options, observer)
+    }
 }
 
 impl Job {
@@ -949,6 +976,56 @@ impl Job {
         }
         Ok(RunOutcome {
             summary: value,
+            steps: world.step_index,
+        })
+    }
+}
+
+impl Job {
+    /// What a rank other than 0 of a distributed run does instead of [`Job::run`]: the same
+    /// steps from the same state (`o.resume`: the newest valid checkpoint in `o.out`, which
+    /// rank 0 reads too), writing nothing. Its world shares each solve with rank 0's, so the
+    /// two must stop together: on the same divergence (the same state gives the same check),
+    /// or when `observer` says so (the ranks' observers agree).
+    pub fn follow(
+        &mut self,
+        o: &RunOptions,
+        observer: &mut dyn Observer,
+    ) -> Result<RunOutcome, Failure> {
+        let (out, names) = (o.out, o.names);
+        let world = &mut self.world;
+        if o.resume {
+            let scan = newest_valid_checkpoint(&out.join("checkpoints"), world)
+                .map_err(|e| format!("{}: {e}", (names.resume)(out)))?;
+            let Some(r) = scan.resumed else {
+                return Err(format!("{}: no valid checkpoint", (names.resume)(out)).into());
+            };
+            self.stats = r.stats.unwrap_or_default();
+        } else {
+            self.stats = RunStats::default();
+        }
+        let steps = o.steps.unwrap_or(self.steps);
+        observer.start(steps.saturating_sub(world.step_index));
+        if world.step_index == 0 {
+            world.detect();
+            if let Err(d) = self.health.initial().check(world) {
+                return Err(diverged(&d, out, names));
+            }
+        }
+        while world.step_index < steps {
+            let r = world.step();
+            self.stats.add(&r);
+            if let Err(d) = self.health.check(world) {
+                return Err(diverged(&d, out, names));
+            }
+            if observer.stop_requested() && world.step_index < steps {
+                break;
+            }
+        }
+        observer.finish();
+        let summary = summary_json(world, &self.stats, o.threads, &self.track, None, None)?;
+        Ok(RunOutcome {
+            summary,
             steps: world.step_index,
         })
     }

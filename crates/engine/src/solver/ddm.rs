@@ -26,6 +26,7 @@
 use super::correction::{self, CorrectionSettings, Overlap};
 use super::delassus::{BodyAccess, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
+use super::exchange::{self, Exchange, ShareBuffers, Unit};
 use super::nlgs::{Nlgs, SolveReport, SweepSums, TermCache};
 use super::partition::{Balance, Partition, STATIC};
 use super::StopRule;
@@ -33,6 +34,8 @@ use crate::laws::{ContactStatus, Elastic};
 use crate::ScenarioError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Domain-decomposition settings.
@@ -131,6 +134,8 @@ impl DdmSettings {
 pub struct DdmTimes {
     pub subdomains: f64,
     pub interface: f64,
+    /// Sharing between ranks (a distributed solve only; part of the two above).
+    pub communication: f64,
 }
 
 /// Contacts solved together (a subdomain's, or an interface group's), bodies in solver
@@ -386,11 +391,12 @@ fn split<'a>(
 
 /// Runs `f` on every subdomain with its view, in parallel when worth it; results in subdomain
 /// order.
-fn for_subdomains<T: Send>(
+fn for_subdomains<T: Send + Default>(
     p: &mut DdmProblem,
     pb: &mut [SolverBody],
     starts: &[usize],
     min_parallel: usize,
+    mine: &(dyn Fn(usize) -> bool + Sync),
     f: impl Fn(&mut Bucket, &mut SubView) -> T + Sync,
 ) -> Vec<T> {
     let k = starts.len() - 1;
@@ -403,6 +409,9 @@ fn for_subdomains<T: Send>(
             .zip(slices)
             .enumerate()
             .map(|(e, (bucket, own))| {
+                if !mine(e) {
+                    return T::default();
+                }
                 let mut view = SubView {
                     own,
                     start: starts[e] as u32,
@@ -418,6 +427,9 @@ fn for_subdomains<T: Send>(
         .zip(slices.into_par_iter())
         .enumerate()
         .map(|(e, (bucket, own))| {
+            if !mine(e) {
+                return T::default();
+            }
             let mut view = SubView {
                 own,
                 start: starts[e] as u32,
@@ -429,18 +441,26 @@ fn for_subdomains<T: Send>(
         .collect()
 }
 
-/// Runs `f` on every interface group, colour after colour, the groups of a colour in parallel
-/// (on the calling thread when the colour has one group or fewer than `min_parallel` contacts:
-/// they touch disjoint bodies, so the order does not matter); results in group order.
-fn for_interface<T: Send>(
+/// Called after each colour of interface groups: their range, the bodies, their results.
+type AfterColour<'a, T> = dyn FnMut(Range<usize>, &mut [SolverBody], &mut [T]) + 'a;
+
+/// Runs `f` on every interface group that is `mine`, colour after colour, the groups of a
+/// colour in parallel (on the calling thread when the colour has one group or fewer than
+/// `min_parallel` contacts: they touch disjoint bodies, so the order does not matter), and
+/// `after` each colour with its groups' range and results; results in group order (the
+/// default for a group that is not `mine`, unless `after` sets it).
+fn for_interface<T: Send + Default>(
     p: &mut DdmProblem,
     pb: &mut [SolverBody],
     starts: &[usize],
     min_parallel: usize,
+    mine: &(dyn Fn(usize) -> bool + Sync),
+    after: &mut AfterColour<T>,
     f: impl Fn(&mut Bucket, &mut dyn BodyAccessDyn) -> T + Sync,
 ) -> Vec<T> {
     let mut out = Vec::with_capacity(p.groups.len());
     for colour in 0..p.colours {
+        let first = out.len();
         // On the calling thread: the sequential interface, a colour of one group (nothing to
         // run beside it), or a colour too small to be worth waking the workers.
         let (mut groups, mut contacts, mut static_pair) = (0, 0, false);
@@ -451,15 +471,31 @@ fn for_interface<T: Send>(
         }
         let sequential = static_pair || groups < 2 || contacts < min_parallel;
         if sequential {
-            for g in p.groups.iter_mut().filter(|g| g.colour == colour) {
-                out.push(f(&mut g.bucket, &mut FullView(pb)));
+            for (i, g) in p
+                .groups
+                .iter_mut()
+                .enumerate()
+                .filter(|(_, g)| g.colour == colour)
+            {
+                out.push(if mine(i) {
+                    f(&mut g.bucket, &mut FullView(pb))
+                } else {
+                    T::default()
+                });
             }
+            let range = first..out.len();
+            after(range.clone(), pb, &mut out[range]);
             continue;
         }
         let (slices, _) = split(pb, starts);
         let mut slots: Vec<Option<&mut [SolverBody]>> = slices.into_iter().map(Some).collect();
         let mut tasks = Vec::new();
-        for g in p.groups.iter_mut().filter(|g| g.colour == colour) {
+        for (i, g) in p
+            .groups
+            .iter_mut()
+            .enumerate()
+            .filter(|(_, g)| g.colour == colour)
+        {
             let (a, b) = (g.pair.0 as usize, g.pair.1 as usize);
             let (sa, sb) = (slots[a].take(), slots[b].take());
             if let (Some(sa), Some(sb)) = (sa, sb) {
@@ -469,14 +505,16 @@ fn for_interface<T: Send>(
                     b: sb,
                     b_start: starts[b] as u32,
                 };
-                tasks.push((&mut g.bucket, view));
+                tasks.push((mine(i), &mut g.bucket, view));
             }
         }
         let results: Vec<T> = tasks
             .into_par_iter()
-            .map(|(g, mut view)| f(g, &mut view))
+            .map(|(m, g, mut view)| if m { f(g, &mut view) } else { T::default() })
             .collect();
         out.extend(results);
+        let range = first..out.len();
+        after(range.clone(), pb, &mut out[range]);
     }
     out
 }
@@ -518,6 +556,276 @@ impl BodyAccess for FullView<'_> {
     #[inline(always)]
     fn body_mut(&mut self, i: u32) -> &mut SolverBody {
         &mut self.0[i as usize]
+    }
+}
+
+/// A bucket's report as shared between ranks ([`super::exchange`]).
+trait Wire: Default + Send {
+    const LEN: usize;
+    fn put(&self, out: &mut [f64]);
+    fn take(x: &[f64]) -> Self;
+}
+
+impl Wire for () {
+    const LEN: usize = 0;
+    fn put(&self, _: &mut [f64]) {}
+    fn take(_: &[f64]) -> Self {}
+}
+
+impl Wire for SweepSums {
+    const LEN: usize = 2;
+    fn put(&self, out: &mut [f64]) {
+        out[0] = self.dwr2;
+        out[1] = self.wr2;
+    }
+    fn take(x: &[f64]) -> Self {
+        SweepSums {
+            dwr2: x[0],
+            wr2: x[1],
+        }
+    }
+}
+
+/// A bounded residual sum: `None` when it was shown to exceed its bound.
+impl Wire for Option<f64> {
+    const LEN: usize = 2;
+    fn put(&self, out: &mut [f64]) {
+        out[0] = f64::from(u8::from(self.is_some()));
+        out[1] = self.unwrap_or(0.0);
+    }
+    fn take(x: &[f64]) -> Self {
+        (x[0] == 1.0).then_some(x[1])
+    }
+}
+
+/// One step's plan of a solve distributed over ranks: who sweeps what, and which bodies each
+/// bucket shares after its phase.
+struct Ranks<'a> {
+    ex: &'a dyn Exchange,
+    sub_owner: Vec<usize>,
+    group_owner: Vec<usize>,
+    /// Per subdomain: its bodies that an interface contact or a drive reads.
+    sub_boundary: Vec<Vec<u32>>,
+    /// Per interface group: the bodies its contacts write.
+    group_bodies: Vec<Vec<u32>>,
+    /// The dynamic bodies in solver numbering: subdomain `s`'s are `starts[s]..starts[s + 1]`.
+    all_bodies: Vec<u32>,
+    starts: &'a [usize],
+    buf: ShareBuffers,
+    values: Vec<f64>,
+    /// Seconds spent sharing.
+    seconds: f64,
+}
+
+impl<'a> Ranks<'a> {
+    fn new(ex: &'a dyn Exchange, p: &DdmProblem, starts: &'a [usize], dr: &[DriveRows]) -> Self {
+        let (k, size) = (p.sub.len(), ex.size());
+        let sub_owner: Vec<usize> = (0..k).map(|s| exchange::owner(s, k, size)).collect();
+        let dynamic = starts[k] as u32;
+        let group_owner = p
+            .groups
+            .iter()
+            .map(|g| match g.pair.0 {
+                STATIC => 0,
+                a => sub_owner[a as usize],
+            })
+            .collect();
+        let mut read = vec![false; dynamic as usize];
+        let group_bodies: Vec<Vec<u32>> = p
+            .groups
+            .iter()
+            .map(|g| {
+                let mut b: Vec<u32> = g
+                    .bucket
+                    .locals
+                    .iter()
+                    .flat_map(|l| [l.body1, l.body2])
+                    .filter(|&i| i < dynamic)
+                    .collect();
+                b.sort_unstable();
+                b.dedup();
+                b
+            })
+            .collect();
+        for &i in group_bodies.iter().flatten() {
+            read[i as usize] = true;
+        }
+        for d in dr {
+            if d.body < dynamic {
+                read[d.body as usize] = true;
+            }
+        }
+        let sub_boundary = (0..k)
+            .map(|s| {
+                (starts[s] as u32..starts[s + 1] as u32)
+                    .filter(|&i| read[i as usize])
+                    .collect()
+            })
+            .collect();
+        Ranks {
+            ex,
+            sub_owner,
+            group_owner,
+            sub_boundary,
+            group_bodies,
+            all_bodies: (0..dynamic).collect(),
+            starts,
+            buf: ShareBuffers::default(),
+            values: Vec::new(),
+            seconds: 0.0,
+        }
+    }
+
+    /// Whether this rank sweeps each subdomain, and each interface group.
+    fn mine(&self) -> (Vec<bool>, Vec<bool>) {
+        let me = self.ex.rank();
+        (
+            self.sub_owner.iter().map(|&o| o == me).collect(),
+            self.group_owner.iter().map(|&o| o == me).collect(),
+        )
+    }
+
+    /// Shares units and their reports `results` (the owners' values end in every rank's).
+    fn share<T: Wire>(&mut self, units: &[Unit], pb: &mut [SolverBody], results: &mut [T]) {
+        let t = Instant::now();
+        self.values.clear();
+        self.values.resize(results.len() * T::LEN, 0.0);
+        for (r, v) in results
+            .iter()
+            .zip(self.values.chunks_exact_mut(T::LEN.max(1)))
+        {
+            r.put(v);
+        }
+        exchange::share(self.ex, units, pb, &mut self.values, &mut self.buf);
+        for (u, (r, v)) in units.iter().zip(
+            results
+                .iter_mut()
+                .zip(self.values.chunks_exact(T::LEN.max(1))),
+        ) {
+            if u.owner != self.ex.rank() {
+                *r = T::take(v);
+            }
+        }
+        self.seconds += t.elapsed().as_secs_f64();
+    }
+
+    /// After a subdomain phase: the bodies others read (`whole`: every body) and the reports.
+    fn share_subdomains<T: Wire>(&mut self, pb: &mut [SolverBody], results: &mut [T], whole: bool) {
+        let all = std::mem::take(&mut self.all_bodies);
+        let boundary = std::mem::take(&mut self.sub_boundary);
+        let units: Vec<Unit> = (0..self.sub_owner.len())
+            .map(|s| Unit {
+                owner: self.sub_owner[s],
+                bodies: if whole {
+                    &all[self.starts[s]..self.starts[s + 1]]
+                } else {
+                    &boundary[s]
+                },
+                values: T::LEN,
+            })
+            .collect();
+        self.share(&units, pb, results);
+        drop(units);
+        self.all_bodies = all;
+        self.sub_boundary = boundary;
+    }
+
+    /// After one colour of interface groups (`range`): their bodies and reports.
+    fn share_groups<T: Wire>(
+        &mut self,
+        range: Range<usize>,
+        pb: &mut [SolverBody],
+        results: &mut [T],
+    ) {
+        let bodies = std::mem::take(&mut self.group_bodies);
+        let units: Vec<Unit> = range
+            .map(|g| Unit {
+                owner: self.group_owner[g],
+                bodies: &bodies[g],
+                values: T::LEN,
+            })
+            .collect();
+        self.share(&units, pb, results);
+        drop(units);
+        self.group_bodies = bodies;
+    }
+
+    /// Every bucket's report (subdomains, then groups), no bodies.
+    fn share_reports<T: Wire>(&mut self, results: &mut [T]) {
+        let units: Vec<Unit> = self
+            .sub_owner
+            .iter()
+            .chain(&self.group_owner)
+            .map(|&owner| Unit {
+                owner,
+                bodies: &[],
+                values: T::LEN,
+            })
+            .collect();
+        self.share(&units, &mut [], results);
+    }
+
+    /// Every contact's impulse and status, from its bucket's owner.
+    fn share_impulses(&mut self, p: &mut DdmProblem) {
+        let t = Instant::now();
+        const LEN: usize = 4;
+        let me = self.ex.rank();
+        let owners: Vec<usize> = self
+            .sub_owner
+            .iter()
+            .chain(&self.group_owner)
+            .copied()
+            .collect();
+        let units: Vec<Unit> = p
+            .buckets()
+            .zip(&owners)
+            .map(|(b, &owner)| Unit {
+                owner,
+                bodies: &[],
+                values: LEN * b.len(),
+            })
+            .collect();
+        self.values.clear();
+        for (b, &owner) in p.buckets().zip(&owners) {
+            for (l, st) in b.locals.iter().zip(&b.status) {
+                if owner == me {
+                    self.values
+                        .extend_from_slice(&[l.r.x, l.r.y, l.r.z, status_code(*st)]);
+                } else {
+                    self.values.extend_from_slice(&[0.0; LEN]);
+                }
+            }
+        }
+        exchange::share(self.ex, &units, &mut [], &mut self.values, &mut self.buf);
+        drop(units);
+        let mut at = 0;
+        for (b, &owner) in p.buckets_mut().zip(&owners) {
+            for (l, st) in b.locals.iter_mut().zip(b.status.iter_mut()) {
+                if owner != me {
+                    let x = &self.values[at..at + LEN];
+                    l.r = crate::math::DVec3::new(x[0], x[1], x[2]);
+                    *st = status_from_code(x[3]);
+                }
+                at += LEN;
+            }
+        }
+        self.seconds += t.elapsed().as_secs_f64();
+    }
+}
+
+fn status_code(s: ContactStatus) -> f64 {
+    match s {
+        ContactStatus::NoContact => 0.0,
+        ContactStatus::Stick => 1.0,
+        ContactStatus::Slide => 2.0,
+    }
+}
+
+fn status_from_code(x: f64) -> ContactStatus {
+    match x as u8 {
+        1 => ContactStatus::Stick,
+        2 => ContactStatus::Slide,
+        _ => ContactStatus::NoContact,
     }
 }
 
@@ -574,6 +882,8 @@ pub struct DdmWorkspace {
     slot: Vec<(u32, u32)>,
     /// The drives, bodies in solver numbering.
     drives: Vec<DriveRows>,
+    /// The ranks of a run distributed over processes (`None`: this process solves alone).
+    pub exchange: Option<Arc<dyn Exchange>>,
 }
 
 /// [`solve`], then the overlap correction ([`super::correction`]) on the same subdomains and
@@ -602,6 +912,7 @@ pub fn solve_and_correct(
         terms,
         slot,
         drives: dr,
+        exchange: ex,
     } = ws;
     pb.clear();
     pb.par_extend(partition.order.par_iter().map(|&i| bodies[i as usize]));
@@ -642,15 +953,34 @@ pub fn solve_and_correct(
         }
     }
     drop(buckets);
+    // Distributed over ranks: each sweeps its own buckets (the warm start, cheap, every rank
+    // does whole, so the bodies start the same everywhere).
+    let mut ranks = ex
+        .as_deref()
+        .filter(|e| e.size() > 1)
+        .map(|e| Ranks::new(e, p, starts, dr));
+    let (sub_mine, group_mine) = match &ranks {
+        Some(r) => r.mine(),
+        None => (vec![true; p.sub.len()], vec![true; p.groups.len()]),
+    };
+    let bucket_mine: Vec<bool> = sub_mine.iter().chain(&group_mine).copied().collect();
+    let (smine, gmine) = (|s: usize| sub_mine[s], |g: usize| group_mine[g]);
+    let every = |_: usize| true;
     let t = Instant::now();
-    for_subdomains(p, pb, starts, min_parallel, |b, v| {
+    for_subdomains(p, pb, starts, min_parallel, &every, |b, v| {
         nlgs.warm_start(&b.locals, v)
     });
     times.subdomains += t.elapsed().as_secs_f64();
     let t = Instant::now();
-    for_interface(p, pb, starts, min_parallel, |b, v| {
-        nlgs.warm_start(&b.locals, v)
-    });
+    for_interface(
+        p,
+        pb,
+        starts,
+        min_parallel,
+        &every,
+        &mut |_, _, _: &mut [()]| {},
+        |b, v| nlgs.warm_start(&b.locals, v),
+    );
     times.interface += t.elapsed().as_secs_f64();
 
     // 2. DDM iterations.
@@ -669,20 +999,33 @@ pub fn solve_and_correct(
         lazy.for_sweep(j, drift);
         let nlgs = &lazy;
         let t = Instant::now();
-        let sub_sums = for_subdomains(p, pb, starts, min_parallel, |b, v| {
+        let mut sub_sums = for_subdomains(p, pb, starts, min_parallel, &smine, |b, v| {
             let mut sums = SweepSums::default();
             for _ in 0..ddm.inner_sweeps {
                 sums = nlgs.sweep_k(j, &mut b.locals, v, &mut b.status);
             }
             sums
         });
+        if let Some(r) = ranks.as_mut() {
+            r.share_subdomains(pb, &mut sub_sums, false);
+        }
         times.subdomains += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let mut gamma_sums = vec![SweepSums::default(); p.groups.len()];
         for _ in 0..ddm.interface_sweeps {
-            gamma_sums = for_interface(p, pb, starts, min_parallel, |b, v| {
-                nlgs.sweep_k(j, &mut b.locals, v, &mut b.status)
-            });
+            gamma_sums = for_interface(
+                p,
+                pb,
+                starts,
+                min_parallel,
+                &gmine,
+                &mut |range, pb, sums| {
+                    if let Some(r) = ranks.as_mut() {
+                        r.share_groups(range, pb, sums);
+                    }
+                },
+                |b, v| nlgs.sweep_k(j, &mut b.locals, v, &mut b.status),
+            );
         }
         let drive_sums = drive::sweep(dr, pb.as_mut_slice());
         times.interface += t.elapsed().as_secs_f64();
@@ -694,18 +1037,33 @@ pub fn solve_and_correct(
         report.iterations = j;
         report.quad = sums.quad();
         if stop.converged(s, j, report.quad, |bound| {
-            residual_within(nlgs, p, dr, pb, q, bound)
+            residual_within(nlgs, p, dr, pb, q, bound, ranks.as_mut(), &bucket_mine)
         }) {
             report.converged = true;
             break;
         }
     }
     report.residual = stop.final_residual(report.iterations, || {
-        residual_within(nlgs, p, dr, pb, q, f64::INFINITY).unwrap_or(f64::INFINITY)
+        residual_within(
+            nlgs,
+            p,
+            dr,
+            pb,
+            q,
+            f64::INFINITY,
+            ranks.as_mut(),
+            &bucket_mine,
+        )
+        .unwrap_or(f64::INFINITY)
     });
     for (d, w) in drives.iter_mut().zip(dr.iter()) {
         d.impulse_v = w.impulse_v;
         d.impulse_w = w.impulse_w;
+    }
+    // Every rank gets every body and every contact's impulse: the scene stays the same.
+    if let Some(r) = ranks.as_mut() {
+        r.share_subdomains(pb, &mut vec![(); p.sub.len()], true);
+        r.share_impulses(p);
     }
 
     // 3. Back to the caller's numbering, in parallel over the caller's bodies and contacts.
@@ -730,14 +1088,27 @@ pub fn solve_and_correct(
 
     // 4. Overlap correction on the same split.
     let corrected = match correction {
-        Some(c) => correct(p, partition, pb, pv, min_parallel, c),
+        Some(c) => correct(
+            p,
+            partition,
+            pb,
+            pv,
+            min_parallel,
+            c,
+            ranks.as_mut(),
+            (&sub_mine, &group_mine),
+        ),
         None => false,
     };
+    if let Some(r) = &ranks {
+        times.communication = r.seconds;
+    }
     (report, times, corrected)
 }
 
 /// The pseudo-velocity sweeps of the overlap correction, on the subdomains in parallel then
-/// on Γ, `settings.sweeps` times.
+/// on Γ, `settings.sweeps` times (distributed over `ranks` as the velocity solve).
+#[allow(clippy::too_many_arguments)]
 fn correct(
     p: &mut DdmProblem,
     partition: &Partition,
@@ -745,7 +1116,11 @@ fn correct(
     pv: &mut Vec<SolverBody>,
     min_parallel: usize,
     c: CorrectionPass,
+    mut ranks: Option<&mut Ranks>,
+    (sub_mine, group_mine): (&[bool], &[bool]),
 ) -> bool {
+    let (smine, gmine) = (|s: usize| sub_mine[s], |g: usize| group_mine[g]);
+    let every = |_: usize| true;
     let starts = &partition.starts;
     pv.clear();
     let (settings, h, e) = (c.settings, c.h, c.elastic);
@@ -753,22 +1128,46 @@ fn correct(
         pb.par_iter()
             .map(|b| correction::at_rest(b, settings.rotation)),
     );
-    let found = for_subdomains(p, pv, starts, min_parallel, |b, _| {
+    // Every rank finds every bucket's overlaps (cheap): all agree on `found`.
+    let found = for_subdomains(p, pv, starts, min_parallel, &every, |b, _| {
         correction::overlaps(settings, h, e, &b.locals, &mut b.overlaps)
     })
     .into_iter()
-    .chain(for_interface(p, pv, starts, min_parallel, |b, _| {
-        correction::overlaps(settings, h, e, &b.locals, &mut b.overlaps)
-    }))
+    .chain(for_interface(
+        p,
+        pv,
+        starts,
+        min_parallel,
+        &every,
+        &mut |_, _, _| {},
+        |b, _| correction::overlaps(settings, h, e, &b.locals, &mut b.overlaps),
+    ))
     .any(|n| n > 0);
     if found {
         for _ in 0..settings.sweeps {
-            for_subdomains(p, pv, starts, min_parallel, |b, v| {
+            let mut none = vec![(); p.sub.len()];
+            none = for_subdomains(p, pv, starts, min_parallel, &smine, |b, v| {
                 correction::sweep(&b.locals, &mut b.overlaps, v, settings.rotation)
             });
-            for_interface(p, pv, starts, min_parallel, |b, v| {
-                correction::sweep(&b.locals, &mut b.overlaps, v, settings.rotation)
-            });
+            if let Some(r) = ranks.as_deref_mut() {
+                r.share_subdomains(pv, &mut none, false);
+            }
+            for_interface(
+                p,
+                pv,
+                starts,
+                min_parallel,
+                &gmine,
+                &mut |range, pv, none: &mut [()]| {
+                    if let Some(r) = ranks.as_deref_mut() {
+                        r.share_groups(range, pv, none);
+                    }
+                },
+                |b, v| correction::sweep(&b.locals, &mut b.overlaps, v, settings.rotation),
+            );
+        }
+        if let Some(r) = ranks {
+            r.share_subdomains(pv, &mut vec![(); p.sub.len()], true);
         }
     }
     let pv = pv.as_slice();
@@ -786,6 +1185,7 @@ fn correct(
 /// Relative natural-map residual over all contacts and drives: each bucket's sum in parallel,
 /// the sums added in the equivalent order, the drives' last; `None` as soon as one bucket's
 /// partial sum shows that it exceeds `bound` (the sums are non-negative).
+#[allow(clippy::too_many_arguments)]
 fn residual_within(
     nlgs: &Nlgs,
     p: &mut DdmProblem,
@@ -793,17 +1193,26 @@ fn residual_within(
     pb: &[SolverBody],
     q: f64,
     bound: f64,
+    ranks: Option<&mut Ranks>,
+    mine: &[bool],
 ) -> Option<f64> {
     let limit = super::exceeding_sum(bound, q);
     let reuse = nlgs.settings.reuse_residual_terms;
     let buckets: Vec<&mut Bucket> = p.buckets_mut().collect();
-    let sums: Vec<Option<f64>> = buckets
+    let mut sums: Vec<Option<f64>> = buckets
         .into_par_iter()
-        .map(|b| {
+        .zip(mine.par_iter())
+        .map(|(b, &mine)| {
+            if !mine {
+                return None;
+            }
             let cache = TermCache::ready(&mut b.terms, b.locals.len(), reuse);
             nlgs.residual_sum_within(&b.locals, pb, limit, cache)
         })
         .collect();
+    if let Some(r) = ranks {
+        r.share_reports(&mut sums);
+    }
     let mut sum = 0.0;
     for s in sums {
         sum += s?;

@@ -22,6 +22,7 @@ pub mod ddm;
 pub mod delassus;
 #[doc(hidden)]
 pub mod drive;
+pub mod exchange;
 mod nlgs;
 #[doc(hidden)]
 pub mod partition;
@@ -31,6 +32,7 @@ pub use correction::CorrectionSettings;
 pub use ddm::DdmSettings;
 pub use delassus::{LocalProblem, SolverBody};
 pub use drive::DriveRows;
+pub use exchange::{Exchange, ThreadRanks};
 pub use nlgs::{Nlgs, SolveReport};
 pub use partition::{Balance, Partition};
 pub use problem::{BlockMatrix, ContactProblem, GlobalProblem, HBlock};

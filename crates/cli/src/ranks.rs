@@ -1,0 +1,121 @@
+//! `mpirun -np K ballast run …` (the `mpi` feature): the run's ranks over MPI (rsmpi on the
+//! system's MPI library). Each rank holds the whole scene; the domain-decomposed solves are
+//! shared (`ballast_engine::solver::exchange`), so the run is bit-identical to one process
+//! with the same partition.
+
+use ballast_engine::solver::Exchange;
+use ballast_run::{Observer, Ranks};
+use mpi::collective::SystemOperation;
+use mpi::datatype::PartitionMut;
+use mpi::topology::SimpleCommunicator;
+use mpi::traits::*;
+use std::sync::Arc;
+
+/// The world communicator of a run launched by `mpirun`.
+pub struct MpiRanks {
+    world: SimpleCommunicator,
+    rank: usize,
+    size: usize,
+}
+
+// MPI is initialised with `Threading::Funneled` and every call below is made by the thread
+// that steps the world (the main thread: the solves call the exchange from it, never from a
+// worker), which is what that level allows; the handle is only ever used there.
+unsafe impl Send for MpiRanks {}
+unsafe impl Sync for MpiRanks {}
+
+impl std::fmt::Debug for MpiRanks {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "MpiRanks {{ rank: {}, size: {} }}", self.rank, self.size)
+    }
+}
+
+impl MpiRanks {
+    /// The world communicator of the initialised `universe`.
+    pub fn new(universe: &mpi::environment::Universe) -> Self {
+        let world = universe.world();
+        let (rank, size) = (world.rank() as usize, world.size() as usize);
+        MpiRanks { world, rank, size }
+    }
+
+    /// Whether any rank passes `true` (every rank must call it).
+    pub fn any(&self, flag: bool) -> bool {
+        let mut all = 0i32;
+        self.world
+            .all_reduce_into(&i32::from(flag), &mut all, SystemOperation::max());
+        all != 0
+    }
+
+    /// Ends every rank of the job at once with exit code `code` (a failing rank: waiting for
+    /// the others in `MPI_Finalize` would hang).
+    pub fn abort(&self, code: i32) -> ! {
+        self.world.abort(code)
+    }
+}
+
+impl Exchange for MpiRanks {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+
+    fn size(&self) -> usize {
+        self.size
+    }
+
+    fn all_gather(&self, mine: &[f64], counts: &[usize], all: &mut [f64]) {
+        let counts: Vec<i32> = counts.iter().map(|&c| c as i32).collect();
+        let displs: Vec<i32> = counts
+            .iter()
+            .scan(0, |at, &c| {
+                let d = *at;
+                *at += c;
+                Some(d)
+            })
+            .collect();
+        let mut part = PartitionMut::new(all, counts, displs);
+        self.world.all_gather_varcount_into(mine, &mut part);
+    }
+}
+
+/// [`Ranks`] over an [`MpiRanks`] shared with the world.
+pub struct RunRanks(pub Arc<MpiRanks>);
+
+impl Ranks for RunRanks {
+    fn exchange(&self) -> Arc<dyn Exchange> {
+        self.0.clone()
+    }
+
+    fn barrier(&self) {
+        self.0.world.barrier();
+    }
+}
+
+/// A rank's observer: `inner`'s, with the stop decided by all ranks together (a Ctrl-C or
+/// SIGTERM seen by any rank stops every rank after the same step).
+pub struct Agreed<'a> {
+    pub inner: &'a mut dyn Observer,
+    pub ranks: &'a MpiRanks,
+}
+
+impl Observer for Agreed<'_> {
+    fn start(&mut self, total: u64) {
+        self.inner.start(total);
+    }
+
+    fn step(&mut self, done: u64, r: &ballast_engine::world::StepReport) {
+        self.inner.step(done, r);
+    }
+
+    fn finish(&mut self) {
+        self.inner.finish();
+    }
+
+    fn stop_requested(&mut self) -> bool {
+        let mine = self.inner.stop_requested();
+        self.ranks.any(mine)
+    }
+
+    fn message(&mut self, line: &str) {
+        self.inner.message(line);
+    }
+}

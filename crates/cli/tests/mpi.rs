@@ -1,0 +1,192 @@
+//! `mpirun -np K ballast run …` (the `mpi` feature; `.ci/run` installs Open MPI and runs
+//! these): a pile and the CI-sized tamping run give the `state_digest` of one process with the
+//! same partition on 2 and 3 ranks; a 2-rank run stopped at a step and resumed on 2 ranks
+//! equals the uninterrupted one; a rank that fails ends the job with an error, no hang.
+#![cfg(feature = "mpi")]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn bin() -> &'static str {
+    env!("CARGO_BIN_EXE_ballast")
+}
+
+fn example(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .join(rel)
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ballast-mpi-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Runs a command, killed after `limit` (a hung job fails the test instead of the suite).
+fn run_for(mut c: Command, limit: Duration) -> Output {
+    let mut child = c
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("mpirun (Open MPI) is installed");
+    let start = Instant::now();
+    loop {
+        if child.try_wait().unwrap().is_some() {
+            return child.wait_with_output().unwrap();
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            panic!("{c:?} still running after {limit:?}: a hang");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// `ballast ARGS` alone, or on `ranks` MPI ranks of one thread each.
+fn ballast<S: AsRef<std::ffi::OsStr>>(ranks: Option<usize>, args: &[S]) -> Output {
+    let mut c = match ranks {
+        None => Command::new(bin()),
+        Some(k) => {
+            let mut c = Command::new("mpirun");
+            c.args([
+                "--allow-run-as-root",
+                "--oversubscribe",
+                "-np",
+                &k.to_string(),
+            ])
+            .arg(bin());
+            c
+        }
+    };
+    c.args(args);
+    if ranks.is_some() {
+        c.args(["--threads", "1"]);
+    }
+    run_for(c, Duration::from_secs(600))
+}
+
+fn ok(o: Output) -> Output {
+    assert!(
+        o.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+fn digest(dir: &Path) -> String {
+    summary(dir)["state_digest"].as_str().unwrap().to_string()
+}
+
+/// The pile (3,000 steps), decomposed 3x1x1 and 2x2x1, on 2 and 3 ranks: one process's digest; rank 0
+/// alone writes the folder and reports the time spent sharing.
+#[test]
+fn pile_on_ranks_equals_one_process() {
+    let root = tmp("pile");
+    let pile = example("examples/pile.toml");
+    let pile = pile.to_str().unwrap();
+    for (parts, ranks) in [("3x1x1", 3), ("2x2x1", 2)] {
+        let run = |ranks: Option<usize>, name: String| {
+            let out = root.join(name);
+            let o = out.to_str().unwrap();
+            let args = [
+                "run",
+                pile,
+                "--subdomains",
+                parts,
+                "--steps",
+                "3000",
+                "--quiet",
+            ];
+            ok(ballast(ranks, &[&args[..], &["--out", o]].concat()));
+            out
+        };
+        let alone = run(None, format!("alone-{parts}"));
+        let split = run(Some(ranks), format!("ranks-{parts}"));
+        let s = summary(&alone);
+        assert!(
+            s["contacts"]["mean"].as_f64().unwrap() > 100.0,
+            "the pile is loaded: {s}"
+        );
+        assert_eq!(digest(&alone), digest(&split), "{parts} on {ranks} ranks");
+        let comm = summary(&split)["timings_s"]["communication"]
+            .as_f64()
+            .unwrap();
+        assert!(comm > 0.0, "{parts}: no time spent sharing");
+        assert_eq!(s["timings_s"]["communication"].as_f64().unwrap(), 0.0);
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// The CI-sized tamping run (its bed prepared once, cached): 2 ranks give one process's
+/// digest; stopped at step 300 and resumed on 2 ranks, the same digest again.
+#[test]
+fn tamping_on_ranks_equals_one_process_and_resumes() {
+    let root = tmp("track");
+    let track = example("examples/python/small_track.toml");
+    let track = track.to_str().unwrap();
+    let cache = root.join("cache");
+    let cache = cache.to_str().unwrap();
+    let dir = |n: &str| root.join(n).to_str().unwrap().to_string();
+    let (alone, split, resumed) = (dir("alone"), dir("split"), dir("resumed"));
+    let common = ["--subdomains", "2x1x1", "--cache", cache, "--quiet"];
+    let args = |out: &str, steps: &str| -> Vec<String> {
+        ["run", track, "--steps", steps, "--out", out]
+            .iter()
+            .chain(common.iter())
+            .map(|s| s.to_string())
+            .collect()
+    };
+    ok(ballast(None, &args(&alone, "600")));
+    ok(ballast(Some(2), &args(&split, "600")));
+    assert_eq!(digest(Path::new(&alone)), digest(Path::new(&split)));
+    // Stopped at step 300 (a checkpoint), then continued to 600 on 2 ranks.
+    ok(ballast(Some(2), &args(&resumed, "300")));
+    let resume: Vec<String> = ["run", "--resume", &resumed, "--steps", "600"]
+        .iter()
+        .chain(common.iter())
+        .map(|s| s.to_string())
+        .collect();
+    ok(ballast(Some(2), &resume));
+    assert_eq!(digest(Path::new(&alone)), digest(Path::new(&resumed)));
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Rank 0 refuses the run (its folder holds another run) while the other ranks wait for it:
+/// the job ends at once with rank 0's error and a failure status, nothing hangs.
+#[test]
+fn a_failing_rank_ends_the_job() {
+    let root = tmp("fail");
+    let out = root.join("out");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(out.join("summary.json"), "{}").unwrap();
+    let pile = example("examples/pile.toml");
+    let o = ballast(
+        Some(3),
+        &[
+            "run",
+            pile.to_str().unwrap(),
+            "--subdomains",
+            "3x1x1",
+            "--steps",
+            "100",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("rank 0") && err.contains("holds another run"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&root);
+}

@@ -1,0 +1,275 @@
+//! The domain decomposition across processes (MPI ranks): what a DDM solve shares, and with
+//! whom.
+//!
+//! Every process holds the whole scene and steps it the same way; the DDM solve
+//! ([`super::ddm`]) is what they split. Rank `r` sweeps the subdomains and the interface
+//! groups it owns ([`owner`]: contiguous blocks of subdomains, a rule of the partition
+//! alone), and after each phase of an iteration the ranks share what the phase wrote that
+//! another rank reads next: the velocities of the bodies the interface contacts and the
+//! drives touch, and each bucket's sums for the stop test. At the end of the solve every rank
+//! receives every body's velocities and every contact's impulse, so the scene stays the same
+//! on every process. Sharing copies values: each bucket is swept with the same arithmetic in
+//! the same order as in one process, so a run over K ranks is bit-identical to a
+//! shared-memory run with the same partition.
+//!
+//! The engine needs no MPI library: [`Exchange`] is the one collective it calls (an
+//! all-gather of `f64`s); the command line implements it over MPI (the `mpi` feature), and
+//! [`ThreadRanks`] in-process, for tests.
+
+use super::delassus::SolverBody;
+use crate::math::DVec3;
+use std::sync::{Arc, Barrier, Mutex};
+
+/// The collective a distributed DDM solve calls: every rank calls it at the same points of
+/// the solve, in the same order.
+pub trait Exchange: Send + Sync + std::fmt::Debug {
+    /// This process's rank, in `0..size()`.
+    fn rank(&self) -> usize;
+    /// The number of ranks.
+    fn size(&self) -> usize;
+    /// All-gather: each rank gives `mine` (`counts[rank]` values); `all` (`Σ counts` values)
+    /// receives every rank's values, rank after rank.
+    fn all_gather(&self, mine: &[f64], counts: &[usize], all: &mut [f64]);
+}
+
+/// The rank that owns subdomain `s` of `n` over `size` ranks: contiguous blocks of
+/// subdomains (boxes numbered along x first, so a rank's boxes are neighbours).
+pub fn owner(s: usize, n: usize, size: usize) -> usize {
+    s * size / n.max(1)
+}
+
+/// Values of a body a solve changes, as shared: velocities and the skip and term-cache
+/// counters (the counters are integers below 2^32, exact in an `f64`).
+pub(crate) const BODY_VALUES: usize = 9;
+
+/// Appends body `b`'s shared values to `out`.
+pub(crate) fn put_body(b: &SolverBody, out: &mut Vec<f64>) {
+    out.extend_from_slice(&[
+        b.v.x,
+        b.v.y,
+        b.v.z,
+        b.w.x,
+        b.w.y,
+        b.w.z,
+        f64::from(b.epoch),
+        f64::from(b.drift),
+        f64::from(b.version),
+    ]);
+}
+
+/// Sets body `b`'s shared values from `x` (written by [`put_body`]).
+pub(crate) fn take_body(b: &mut SolverBody, x: &[f64]) {
+    b.v = DVec3::new(x[0], x[1], x[2]);
+    b.w = DVec3::new(x[3], x[4], x[5]);
+    b.epoch = x[6] as u32;
+    b.drift = x[7] as f32;
+    b.version = x[8] as u32;
+}
+
+/// What one phase of a distributed solve shares from one bucket: the rank that swept it, the
+/// bodies it wrote that others read (solver numbering), and how many values it reports.
+pub(crate) struct Unit<'a> {
+    pub owner: usize,
+    pub bodies: &'a [u32],
+    pub values: usize,
+}
+
+/// Buffers of [`share`], kept from one call to the next.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ShareBuffers {
+    send: Vec<f64>,
+    all: Vec<f64>,
+    counts: Vec<usize>,
+    cursor: Vec<usize>,
+}
+
+/// Shares `units`: each rank sends the bodies and values of the units it owns (`values` holds
+/// every unit's values, unit after unit) and receives everyone else's, so that afterwards
+/// `bodies` and `values` hold, on every rank, what each unit's owner computed.
+pub(crate) fn share(
+    ex: &dyn Exchange,
+    units: &[Unit],
+    bodies: &mut [SolverBody],
+    values: &mut [f64],
+    buf: &mut ShareBuffers,
+) {
+    let (me, size) = (ex.rank(), ex.size());
+    buf.counts.clear();
+    buf.counts.resize(size, 0);
+    buf.send.clear();
+    let mut off = 0;
+    for u in units {
+        buf.counts[u.owner] += u.bodies.len() * BODY_VALUES + u.values;
+        if u.owner == me {
+            for &b in u.bodies {
+                put_body(&bodies[b as usize], &mut buf.send);
+            }
+            buf.send.extend_from_slice(&values[off..off + u.values]);
+        }
+        off += u.values;
+    }
+    buf.all.clear();
+    buf.all.resize(buf.counts.iter().sum(), 0.0);
+    ex.all_gather(&buf.send, &buf.counts, &mut buf.all);
+    // Where each rank's part starts, then read in unit order.
+    buf.cursor.clear();
+    let mut at = 0;
+    for &c in &buf.counts {
+        buf.cursor.push(at);
+        at += c;
+    }
+    let mut off = 0;
+    for u in units {
+        let c = &mut buf.cursor[u.owner];
+        if u.owner == me {
+            *c += u.bodies.len() * BODY_VALUES + u.values;
+        } else {
+            for &b in u.bodies {
+                take_body(&mut bodies[b as usize], &buf.all[*c..*c + BODY_VALUES]);
+                *c += BODY_VALUES;
+            }
+            values[off..off + u.values].copy_from_slice(&buf.all[*c..*c + u.values]);
+            *c += u.values;
+        }
+        off += u.values;
+    }
+}
+
+/// In-process ranks: `K` threads, each stepping its own copy of a scene, sharing through
+/// memory what MPI ranks would send. Used by tests to check that a distributed solve is
+/// bit-identical to a single process without launching MPI.
+#[derive(Debug)]
+pub struct ThreadRanks {
+    rank: usize,
+    size: usize,
+    shared: Arc<ThreadShared>,
+}
+
+#[derive(Debug)]
+struct ThreadShared {
+    barrier: Barrier,
+    parts: Mutex<Vec<Vec<f64>>>,
+}
+
+impl ThreadRanks {
+    /// The `k` ranks of one group, to hand one to each thread.
+    pub fn group(k: usize) -> Vec<ThreadRanks> {
+        let shared = Arc::new(ThreadShared {
+            barrier: Barrier::new(k),
+            parts: Mutex::new(vec![Vec::new(); k]),
+        });
+        (0..k)
+            .map(|rank| ThreadRanks {
+                rank,
+                size: k,
+                shared: shared.clone(),
+            })
+            .collect()
+    }
+}
+
+impl Exchange for ThreadRanks {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+
+    fn size(&self) -> usize {
+        self.size
+    }
+
+    fn all_gather(&self, mine: &[f64], counts: &[usize], all: &mut [f64]) {
+        debug_assert_eq!(mine.len(), counts[self.rank]);
+        {
+            let mut parts = self.shared.parts.lock().expect("a rank thread panicked");
+            parts[self.rank].clear();
+            parts[self.rank].extend_from_slice(mine);
+        }
+        self.shared.barrier.wait();
+        {
+            let parts = self.shared.parts.lock().expect("a rank thread panicked");
+            let mut at = 0;
+            for p in parts.iter() {
+                all[at..at + p.len()].copy_from_slice(p);
+                at += p.len();
+            }
+        }
+        // Nobody writes its next part before everyone has read this one.
+        self.shared.barrier.wait();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each subdomain has one owner, owners never decrease along the subdomains, and every
+    /// rank owns some subdomain when there are at least as many subdomains as ranks.
+    #[test]
+    fn owners_are_contiguous_blocks() {
+        for n in 1..20 {
+            for size in 1..=n {
+                let o: Vec<usize> = (0..n).map(|s| owner(s, n, size)).collect();
+                assert!(o.windows(2).all(|w| w[0] <= w[1]), "{o:?}");
+                for r in 0..size {
+                    assert!(o.contains(&r), "n {n} size {size}: {o:?}");
+                }
+            }
+        }
+    }
+
+    /// A body's shared values round-trip exactly.
+    #[test]
+    fn body_values_round_trip() {
+        let b = SolverBody {
+            v: DVec3::new(0.1, -2.5e-7, 3.0),
+            w: DVec3::new(1e300, -0.0, 7.25),
+            epoch: u32::MAX,
+            drift: 1.5e-3,
+            version: 123_456_789,
+            inv_mass: 0.5,
+            inv_inertia: crate::math::DMat3::IDENTITY,
+        };
+        let mut x = Vec::new();
+        put_body(&b, &mut x);
+        assert_eq!(x.len(), BODY_VALUES);
+        let mut c = SolverBody {
+            v: DVec3::ZERO,
+            w: DVec3::ZERO,
+            epoch: 0,
+            drift: 0.0,
+            version: 0,
+            ..b
+        };
+        take_body(&mut c, &x);
+        assert_eq!(c.v, b.v);
+        assert_eq!(c.w, b.w);
+        assert_eq!(
+            (c.epoch, c.drift.to_bits(), c.version),
+            (b.epoch, b.drift.to_bits(), b.version)
+        );
+    }
+
+    /// Three in-process ranks gather parts of different lengths in rank order.
+    #[test]
+    fn thread_ranks_gather_in_rank_order() {
+        let counts = [2, 0, 3];
+        let handles: Vec<_> = ThreadRanks::group(3)
+            .into_iter()
+            .map(|r| {
+                std::thread::spawn(move || {
+                    let mine: Vec<f64> = (0..counts[r.rank()])
+                        .map(|i| (10 * r.rank() + i) as f64)
+                        .collect();
+                    let mut all = vec![0.0; 5];
+                    for _ in 0..3 {
+                        r.all_gather(&mine, &counts, &mut all);
+                    }
+                    all
+                })
+            })
+            .collect();
+        for h in handles {
+            assert_eq!(h.join().unwrap(), vec![0.0, 1.0, 20.0, 21.0, 22.0]);
+        }
+    }
+}
