@@ -693,6 +693,9 @@ fn checkpoints_cover_all_state_fields() {
             // between steps, never inside one)
             "drives",
             "scratch",
+            // how the process runs, not what it simulates: the ranks a distributed run
+            // shares its solves with, set by the front end on every start and resume
+            "exchange",
         ],
         "World",
     );
