@@ -14,7 +14,8 @@ pub struct PhaseTimes {
     pub subdomains: f64,
     /// Of `nlgs`: interface sweeps (domain decomposition only).
     pub interface: f64,
-    /// Of `nlgs`: sharing between the ranks of a distributed run (MPI; 0 in one process).
+    /// Of `detection` and `nlgs`: sharing between the ranks of a distributed run (MPI; 0 in
+    /// one process).
     #[serde(default)]
     pub communication: f64,
     /// Free velocities, kinematic drivers, position/orientation update.

@@ -541,6 +541,7 @@ impl World {
     /// alone. Results are bit-identical either way; a monolithic solve (no `[ddm]`) runs whole
     /// on every rank.
     pub fn set_exchange(&mut self, exchange: Option<Arc<dyn Exchange>>) {
+        self.detector.exchange = exchange.clone();
         self.exchange = exchange;
     }
 
@@ -616,6 +617,7 @@ impl World {
         );
         let max_penetration = self.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g));
         times.detection = lap.lap();
+        times.communication = self.detector.shared_seconds;
 
         // 2. Free velocities.
         let b = &self.bodies;
@@ -769,7 +771,7 @@ impl World {
                 );
                 times.subdomains = t.subdomains;
                 times.interface = t.interface;
-                times.communication = t.communication;
+                times.communication += t.communication;
                 (report, corrected)
             }
         };

@@ -5,6 +5,7 @@
 
 mod broad;
 pub mod coherence;
+mod ranks;
 // Narrow-phase routines, exposed for the crate's tests and benches; not part of the supported
 // API.
 #[doc(hidden)]
@@ -18,7 +19,9 @@ use crate::bodies::{BodyKind, BodySet};
 use crate::math::{DQuat, DVec3};
 use crate::shapes::Shape;
 use crate::slices::split_lengths;
+use crate::solver::Exchange;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// One detected contact point, before the contact frame and the law are attached.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -68,6 +71,10 @@ pub struct Detector {
     merged: Vec<(u32, u32)>,
     /// The body kinds of the last detection (the broad phase's skip rule depends on them).
     kinds: Vec<BodyKind>,
+    /// The ranks that share the narrow phase in a distributed run (see [`ranks`]).
+    pub(crate) exchange: Option<Arc<dyn Exchange>>,
+    /// Seconds the last detection spent sharing between ranks.
+    pub(crate) shared_seconds: f64,
 }
 
 /// A pair's narrow-phase outcome at the anchor poses: bodies (body 1 first), manifold (`len`
@@ -349,52 +356,68 @@ impl Detector {
         // Each pair: last step's outcome, found by a binary search (parallel, no serial merge),
         // reused if neither body was re-anchored, else computed at the anchors with its hint.
         let mut results = std::mem::take(&mut self.spare_results);
+        let exchange = self.exchange.clone().filter(|e| e.size() > 1);
         let this = &*self;
         let (previous_pairs, previous) = (&self.pairs, &self.results);
         let moved = &self.anchors.moved;
-        pairs
-            .par_iter()
-            .with_min_len(32)
-            .map(|&(i, j)| {
-                let (iu, ju) = (i as usize, j as usize);
-                let last = previous_pairs
-                    .binary_search(&(i, j))
-                    .ok()
-                    .map(|k| &previous[k]);
-                if let Some(last) = last {
-                    if last.reusable && !moved[iu] && !moved[ju] {
-                        return PairGeometry {
-                            reused: true,
-                            ..*last
-                        };
-                    }
+        let last_of = |pair: (u32, u32)| {
+            previous_pairs
+                .binary_search(&pair)
+                .ok()
+                .map(|k| &previous[k])
+        };
+        let reused = |(i, j): (u32, u32), last: Option<&PairGeometry>| {
+            last.filter(|l| l.reusable && !moved[i as usize] && !moved[j as usize])
+                .map(|l| PairGeometry { reused: true, ..*l })
+        };
+        let compute = |(i, j): (u32, u32), last: Option<&PairGeometry>| {
+            let (iu, ju) = (i as usize, j as usize);
+            let hint = last.map_or(FaceHint::NONE, |l| l.hint);
+            let alert = alert + reach(margins[iu]) + reach(margins[ju]);
+            let reusable = reuse > 0.0 && margins[iu] <= reuse && margins[ju] <= reuse;
+            let geometry = match (this.world_poly(bodies, iu), this.world_poly(bodies, ju)) {
+                (Some(a), Some(b)) => {
+                    let (m, hint) = narrow::polyhedron_polyhedron_hinted(&a, &b, alert, hint);
+                    PairGeometry::new(i, j, m, hint)
                 }
-                let hint = last.map_or(FaceHint::NONE, |l| l.hint);
-                let alert = alert + reach(margins[iu]) + reach(margins[ju]);
-                let reusable = reuse > 0.0 && margins[iu] <= reuse && margins[ju] <= reuse;
-                let geometry = match (this.world_poly(bodies, iu), this.world_poly(bodies, ju)) {
-                    (Some(a), Some(b)) => {
-                        let (m, hint) = narrow::polyhedron_polyhedron_hinted(&a, &b, alert, hint);
-                        PairGeometry::new(i, j, m, hint)
-                    }
-                    (None, Some(b)) => {
-                        let (nrm, off) = plane_world(&this.anchors, bodies, iu);
-                        let m = narrow::plane_polyhedron(nrm, off, &b, alert);
-                        PairGeometry::new(i, j, m, FaceHint::NONE)
-                    }
-                    (Some(a), None) => {
-                        let (nrm, off) = plane_world(&this.anchors, bodies, ju);
-                        let m = narrow::plane_polyhedron(nrm, off, &a, alert);
-                        PairGeometry::new(j, i, m, FaceHint::NONE)
-                    }
-                    (None, None) => PairGeometry::new(i, j, None, FaceHint::NONE),
-                };
-                PairGeometry {
-                    reusable,
-                    ..geometry
+                (None, Some(b)) => {
+                    let (nrm, off) = plane_world(&this.anchors, bodies, iu);
+                    let m = narrow::plane_polyhedron(nrm, off, &b, alert);
+                    PairGeometry::new(i, j, m, FaceHint::NONE)
                 }
-            })
-            .collect_into_vec(&mut results);
+                (Some(a), None) => {
+                    let (nrm, off) = plane_world(&this.anchors, bodies, ju);
+                    let m = narrow::plane_polyhedron(nrm, off, &a, alert);
+                    PairGeometry::new(j, i, m, FaceHint::NONE)
+                }
+                (None, None) => PairGeometry::new(i, j, None, FaceHint::NONE),
+            };
+            PairGeometry {
+                reusable,
+                ..geometry
+            }
+        };
+        let shared = match exchange.as_deref() {
+            None => {
+                pairs
+                    .par_iter()
+                    .with_min_len(32)
+                    .map(|&pair| {
+                        let last = last_of(pair);
+                        reused(pair, last).unwrap_or_else(|| compute(pair, last))
+                    })
+                    .collect_into_vec(&mut results);
+                0.0
+            }
+            Some(ex) => ranks::narrow_on_ranks(
+                ex,
+                pairs.len(),
+                |k| reused(pairs[k], last_of(pairs[k])),
+                |k| compute(pairs[k], last_of(pairs[k])),
+                &mut results,
+            ),
+        };
+        self.shared_seconds = shared;
         write_points(&results, &self.anchors, bodies, reuse > 0.0, out);
         self.spare_pairs = std::mem::replace(&mut self.pairs, pairs);
         self.spare_results = std::mem::replace(&mut self.results, results);

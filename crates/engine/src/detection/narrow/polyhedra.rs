@@ -105,6 +105,14 @@ impl FaceHint {
         FaceHint(face | (u32::from(of_b) << 31))
     }
 
+    /// The hint as one number (for sharing between ranks), and back.
+    pub(crate) fn to_bits(self) -> u32 {
+        self.0
+    }
+    pub(crate) fn from_bits(bits: u32) -> FaceHint {
+        FaceHint(bits)
+    }
+
     /// `(of_b, face)`, or `None`.
     pub fn get(self) -> Option<(bool, usize)> {
         (self != FaceHint::NONE).then_some((self.0 >> 31 == 1, (self.0 & (u32::MAX >> 1)) as usize))
