@@ -84,10 +84,6 @@ impl Ranks for RunRanks {
     fn exchange(&self) -> Arc<dyn Exchange> {
         self.0.clone()
     }
-
-    fn barrier(&self) {
-        self.0.world.barrier();
-    }
 }
 
 /// A rank's observer: `inner`'s, with the stop decided by all ranks together (a Ctrl-C or

@@ -126,33 +126,45 @@ fn pile_on_ranks_equals_one_process() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
-/// The CI-sized tamping run (its bed prepared once, cached): 2 ranks give one process's
-/// digest; stopped at step 300 and resumed on 2 ranks, the same digest again.
+/// The CI-sized tamping run: its bed prepared by 2 ranks together (rank 0 writing the one
+/// cache file) and the run on them give one process's digest; stopped at step 300 and resumed on 2 ranks, the same digest again.
 #[test]
 fn tamping_on_ranks_equals_one_process_and_resumes() {
     let root = tmp("track");
     let track = example("examples/python/small_track.toml");
     let track = track.to_str().unwrap();
-    let cache = root.join("cache");
-    let cache = cache.to_str().unwrap();
     let dir = |n: &str| root.join(n).to_str().unwrap().to_string();
     let (alone, split, resumed) = (dir("alone"), dir("split"), dir("resumed"));
-    let common = ["--subdomains", "2x1x1", "--cache", cache, "--quiet"];
-    let args = |out: &str, steps: &str| -> Vec<String> {
-        ["run", track, "--steps", steps, "--out", out]
-            .iter()
-            .chain(common.iter())
-            .map(|s| s.to_string())
-            .collect()
+    let (cache1, cache2) = (dir("cache-alone"), dir("cache-ranks"));
+    let args = |out: &str, steps: &str, cache: &str| -> Vec<String> {
+        [
+            "run", track, "--steps", steps, "--out", out, "--cache", cache,
+        ]
+        .iter()
+        .chain(&["--subdomains", "2x1x1", "--quiet"])
+        .map(|s| s.to_string())
+        .collect()
     };
-    ok(ballast(None, &args(&alone, "600")));
-    ok(ballast(Some(2), &args(&split, "600")));
+    // The bed prepared by the ranks first (cache-ranks is empty), then by one process.
+    ok(ballast(Some(2), &args(&split, "600", &cache2)));
+    ok(ballast(None, &args(&alone, "600", &cache1)));
+    // One bed each, under the same key (its name); the bytes differ by the preparation's wall
+    // time, which the file records, so the bed is compared by the runs' digests.
+    let bed = |d: &str| {
+        let files: Vec<_> = std::fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(files.len(), 1, "{d}: {files:?}");
+        files[0].clone()
+    };
+    assert_eq!(bed(&cache1), bed(&cache2));
     assert_eq!(digest(Path::new(&alone)), digest(Path::new(&split)));
     // Stopped at step 300 (a checkpoint), then continued to 600 on 2 ranks.
-    ok(ballast(Some(2), &args(&resumed, "300")));
+    ok(ballast(Some(2), &args(&resumed, "300", &cache2)));
     let resume: Vec<String> = ["run", "--resume", &resumed, "--steps", "600"]
         .iter()
-        .chain(common.iter())
+        .chain(&["--cache", &cache2, "--subdomains", "2x1x1", "--quiet"])
         .map(|s| s.to_string())
         .collect();
     ok(ballast(Some(2), &resume));

@@ -79,6 +79,7 @@ fn build(source: &str, text: &str, cache: Option<&Path>) -> PyResult<Simulation>
         subdomains: None,
         quiet: true,
         names: &NAMES,
+        exchange: None,
     };
     let job = Job::build(source, text, &options, &mut Plain).map_err(failure_error)?;
     Ok(Simulation { job, vtk: None })

@@ -64,7 +64,7 @@ use ballast_engine::fnv1a64;
 use ballast_engine::math::{DQuat, DVec3};
 use ballast_engine::output::write_atomic;
 use ballast_engine::shapes::Shape;
-use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, SolverSettings};
+use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, Exchange, SolverSettings};
 use ballast_engine::world::{StepSettings, World};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -371,6 +371,27 @@ pub fn load_or_prepare(
     cache_dir: Option<&Path>,
     progress: &mut dyn FnMut(PrepProgress),
 ) -> Result<(PreparedSample, Option<String>), Error> {
+    load_or_prepare_shared(track, ballast, prep, friction, cache_dir, None, progress)
+}
+
+/// [`load_or_prepare`] by the ranks of a distributed run together (`exchange`; see
+/// `ballast_engine::solver::exchange`): each rank prepares the same bed in lockstep with the
+/// others, sharing the solves and the narrow phase, and rank 0 alone writes the cache. The
+/// bed is bit-identical to one process's.
+///
+/// # Errors
+///
+/// As [`load_or_prepare`].
+#[allow(clippy::too_many_arguments)]
+pub fn load_or_prepare_shared(
+    track: &TrackSpec,
+    ballast: &BallastSpec,
+    prep: &PreparationSpec,
+    friction: &TrackFriction,
+    cache_dir: Option<&Path>,
+    exchange: Option<&Arc<dyn Exchange>>,
+    progress: &mut dyn FnMut(PrepProgress),
+) -> Result<(PreparedSample, Option<String>), Error> {
     track.validate()?;
     ballast.grains.validate()?;
     prep.validate()?;
@@ -390,9 +411,10 @@ pub fn load_or_prepare(
             }
         }
     }
-    let sample = prepare_from(track, ballast, prep, generated, progress);
+    let sample = prepare_from(track, ballast, prep, generated, exchange, progress);
     let mut warning = None;
-    if let Some(p) = &path {
+    let writer = exchange.is_none_or(|e| e.rank() == 0);
+    if let Some(p) = path.as_ref().filter(|_| writer) {
         let written = std::fs::create_dir_all(p.parent().unwrap_or(Path::new(".")))
             .and_then(|_| write_atomic(p, &encode(&sample, &key)));
         if let Err(e) = written {
@@ -470,12 +492,13 @@ fn prepare_from(
     ballast: &BallastSpec,
     prep: &PreparationSpec,
     grains: Vec<PlacedGrain>,
+    exchange: Option<&Arc<dyn Exchange>>,
     progress: &mut dyn FnMut(PrepProgress),
 ) -> PreparedSample {
     if prep.tiled {
-        prepare_tiled(track, ballast, prep, grains, progress)
+        prepare_tiled(track, ballast, prep, grains, exchange, progress)
     } else {
-        deposit(track, ballast, prep, grains, progress)
+        deposit(track, ballast, prep, grains, exchange, progress)
     }
 }
 
@@ -542,6 +565,7 @@ fn deposit(
     ballast: &BallastSpec,
     prep: &PreparationSpec,
     mut grains: Vec<PlacedGrain>,
+    exchange: Option<&Arc<dyn Exchange>>,
     progress: &mut dyn FnMut(PrepProgress),
 ) -> PreparedSample {
     let clock = std::time::Instant::now();
@@ -562,6 +586,7 @@ fn deposit(
     // Deposition into the empty box.
     let (bodies, layout) = build_bodies(track, &Blocks::Absent, None, &grains, density);
     let mut world = World::new(bodies, friction.table(), settings.clone());
+    world.set_exchange(exchange.cloned());
     let mut steps = settle(
         &mut world,
         prep,
@@ -598,6 +623,7 @@ fn deposit(
     // Settle around the fixed blocks.
     let (bodies, layout) = build_bodies(track, &Blocks::Fixed, None, &grains, density);
     let mut world = World::new(bodies, friction.table(), settings);
+    world.set_exchange(exchange.cloned());
     steps += settle(
         &mut world,
         prep,
@@ -700,6 +726,7 @@ fn prepare_tiled(
     ballast: &BallastSpec,
     prep: &PreparationSpec,
     generated: Vec<PlacedGrain>,
+    exchange: Option<&Arc<dyn Exchange>>,
     progress: &mut dyn FnMut(PrepProgress),
 ) -> PreparedSample {
     let clock = std::time::Instant::now();
@@ -711,6 +738,7 @@ fn prepare_tiled(
         ballast,
         &piece,
         generated[..n].to_vec(),
+        exchange,
         progress,
     );
     let mut grains = Vec::with_capacity(seg.grains.len() * copies);
@@ -730,6 +758,7 @@ fn prepare_tiled(
         deposition_friction(prep).table(),
         deposition_settings(prep),
     );
+    world.set_exchange(exchange.cloned());
     let steps = settle(&mut world, prep, 2, prep.tile_settle_time, 0.0, progress);
     let simulated = world.time;
     let mut sample = heal_and_keep(&mut world, prep, layout.grains, grains, progress);

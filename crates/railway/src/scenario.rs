@@ -47,16 +47,19 @@ use crate::grading::{GradingCurve, GradingTable};
 use crate::grains::GrainSpec;
 use crate::indicators::Indicators;
 use crate::preparation::{
-    load_or_prepare, BallastSpec, PrepProgress, PreparationReport, PreparationSpec,
+    load_or_prepare_shared, BallastSpec, PrepProgress, PreparationReport, PreparationSpec,
 };
 use crate::scene::{build_bodies, Blocks, Layout, TrackFriction};
 use crate::tamping::{Cycle, TampingSpec};
 use crate::track::TrackSpec;
 use ballast_engine::laws::NormalLaw;
-use ballast_engine::solver::{ConvergenceNorm, CorrectionSettings, DdmSettings, SolverSettings};
+use ballast_engine::solver::{
+    ConvergenceNorm, CorrectionSettings, DdmSettings, Exchange, SolverSettings,
+};
 use ballast_engine::world::{StepSettings, World};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+use std::sync::Arc;
 
 /// `[simulation]` of a track scenario.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -700,13 +703,30 @@ impl TrackScenario {
         cache_dir: Option<&Path>,
         progress: &mut dyn FnMut(PrepProgress),
     ) -> Result<TrackModel, Error> {
+        self.build_shared(cache_dir, None, progress)
+    }
+
+    /// [`TrackScenario::build`] by the ranks of a distributed run together: the bed prepared
+    /// in lockstep ([`crate::preparation::load_or_prepare_shared`]; rank 0 writes the cache).
+    /// The world returned solves alone until its caller shares it (`World::set_exchange`).
+    ///
+    /// # Errors
+    ///
+    /// As [`TrackScenario::build`].
+    pub fn build_shared(
+        &self,
+        cache_dir: Option<&Path>,
+        exchange: Option<&Arc<dyn Exchange>>,
+        progress: &mut dyn FnMut(PrepProgress),
+    ) -> Result<TrackModel, Error> {
         self.validate()?;
-        let (sample, warning) = load_or_prepare(
+        let (sample, warning) = load_or_prepare_shared(
             &self.track,
             &self.ballast,
             &self.preparation,
             &self.friction,
             cache_dir,
+            exchange,
             progress,
         )?;
         let cycle = self.tamping.build(&self.track);

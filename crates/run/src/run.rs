@@ -172,15 +172,14 @@ pub struct RunArgs<'a> {
 }
 
 /// The processes of a run distributed over ranks, as a front end provides them (the command
-/// line's over MPI). Every rank builds the same scene and steps it in lockstep, sharing its
-/// domain-decomposed solves ([`ballast_engine::solver::exchange`]); rank 0 writes the run
-/// folder, the others follow ([`Job::follow`]). The observer of each rank must agree with the
+/// line's over MPI). Every rank builds the same scene (a track's bed prepared together) and
+/// steps it in lockstep, sharing its domain-decomposed solves and its narrow phase
+/// ([`ballast_engine::solver::exchange`]); rank 0 writes the run folder and the bed cache, the
+/// others follow ([`Job::follow`]). The observer of each rank must agree with the
 /// others on [`Observer::stop_requested`].
 pub trait Ranks {
     /// The solves' collective.
     fn exchange(&self) -> std::sync::Arc<dyn ballast_engine::solver::Exchange>;
-    /// Returns once every rank has called it.
-    fn barrier(&self);
 }
 
 /// How [`Job::build`] builds a scene.
@@ -194,6 +193,9 @@ pub struct BuildOptions<'a> {
     pub quiet: bool,
     /// How the front end names its arguments.
     pub names: &'a ArgNames,
+    /// The ranks of a distributed run, which prepare a track's bed together (rank 0 writes
+    /// the cache); `None`: one process.
+    pub exchange: Option<&'a std::sync::Arc<dyn ballast_engine::solver::Exchange>>,
 }
 
 /// How [`Job::run`] runs.
@@ -407,11 +409,7 @@ pub fn run(a: &RunArgs, observer: &mut dyn Observer) -> Result<RunOutcome, Failu
         }
     }
     let (source, text) = scenario_text(a)?;
-    // Rank 0 prepares the bed (and caches it) before the others read it from the cache.
-    let ranks = a.ranks.filter(|_| exchange.is_some());
-    if let (Some(r), false) = (ranks, writer) {
-        r.barrier();
-    }
+    // The ranks prepare a track's bed together (rank 0 writes the cache).
     let mut job = Job::build(
         &source,
         &text,
@@ -420,12 +418,10 @@ pub fn run(a: &RunArgs, observer: &mut dyn Observer) -> Result<RunOutcome, Failu
             subdomains: a.subdomains,
             quiet: a.quiet || !writer,
             names,
+            exchange: exchange.as_ref(),
         },
         observer,
     )?;
-    if let (Some(r), true) = (ranks, writer) {
-        r.barrier();
-    }
     job.world_mut().set_exchange(exchange);
     let options = RunOptions {
         out: a.out,
@@ -523,7 +519,7 @@ impl Job {
             ));
         }
         let model = s
-            .build(o.cache, &mut |p: PrepProgress| {
+            .build_shared(o.cache, o.exchange, &mut |p: PrepProgress| {
                 if !quiet && last.elapsed().as_secs_f64() > 5.0 {
                     last = std::time::Instant::now();
                     observer.message(&format!(

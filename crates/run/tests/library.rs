@@ -64,6 +64,7 @@ fn build(observer: &mut Recorder) -> Job {
         subdomains: None,
         quiet: false,
         names: &NAMES,
+        exchange: None,
     };
     Job::build("sliding_block.toml", &scenario(), &options, observer).unwrap()
 }
@@ -200,6 +201,7 @@ fn build_text(text: &str, subdomains: Option<[usize; 3]>, observer: &mut Recorde
         subdomains,
         quiet: true,
         names: &NAMES,
+        exchange: None,
     };
     Job::build("pile.toml", text, &options, observer).unwrap()
 }
