@@ -117,6 +117,8 @@ fn pile_on_ranks_equals_one_process() {
             "the pile is loaded: {s}"
         );
         assert_eq!(digest(&alone), digest(&split), "{parts} on {ranks} ranks");
+        assert_eq!(summary(&split)["ranks"], ranks);
+        assert_eq!(s["ranks"], 1);
         let comm = summary(&split)["timings_s"]["communication"]
             .as_f64()
             .unwrap();

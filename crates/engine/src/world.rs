@@ -545,6 +545,11 @@ impl World {
         self.exchange = exchange;
     }
 
+    /// The ranks this world's solves are shared between (1 when it solves alone).
+    pub fn ranks(&self) -> usize {
+        self.exchange.as_ref().map_or(1, |e| e.size())
+    }
+
     /// Frees the step pipeline's buffers (local problems, solver bodies, detection output,
     /// domain-decomposition workspace: about 0.5 kB per contact point), as Rapier's pipeline
     /// can be dropped: the next step rebuilds them from the state, with the same result bit

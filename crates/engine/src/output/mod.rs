@@ -78,6 +78,8 @@ pub struct Summary {
     pub time: f64,
     pub bodies: usize,
     pub threads: usize,
+    /// Processes the run's solves were shared between (MPI ranks; 1: one process).
+    pub ranks: usize,
     pub subdomains: String,
     pub timings_s: PhaseTimes,
     pub contacts: ContactSummary,
@@ -118,6 +120,7 @@ impl Summary {
             time: world.time,
             bodies: world.bodies.len(),
             threads,
+            ranks: world.ranks(),
             subdomains: world
                 .settings
                 .ddm
