@@ -1,7 +1,8 @@
 //! `mpirun -np K ballast run …` (the `mpi` feature; `.ci/run` installs Open MPI and runs
 //! these): a pile and the CI-sized tamping run give the `state_digest` of one process with the
 //! same partition on 2 and 3 ranks; a 2-rank run stopped at a step and resumed on 2 ranks
-//! equals the uninterrupted one; a rank that fails ends the job with an error, no hang.
+//! equals the uninterrupted one (ParaView frames too: one piece per rank, the same frames); a
+//! rank that fails ends the job with an error, no hang.
 #![cfg(feature = "mpi")]
 
 use std::path::{Path, PathBuf};
@@ -86,6 +87,53 @@ fn digest(dir: &Path) -> String {
     summary(dir)["state_digest"].as_str().unwrap().to_string()
 }
 
+/// The times of a run folder's frames (its `grains.pvd`), after checking that
+/// every file listed exists and, written on `ranks` ranks, that grains and contacts are
+/// parallel files naming one existing piece per rank (bodies: one file).
+fn frames(dir: &Path, ranks: usize) -> Vec<String> {
+    let attr = |tag: &str, name: &str| {
+        tag.split(&format!("{name}=\""))
+            .nth(1)
+            .and_then(|s| s.split('"').next())
+            .map(String::from)
+    };
+    let mut grains = Vec::new();
+    for series in ["grains", "bodies", "contacts"] {
+        let pvd = std::fs::read_to_string(dir.join(format!("{series}.pvd"))).unwrap();
+        let listed: Vec<(String, String)> = pvd
+            .split("<DataSet")
+            .skip(1)
+            .map(|t| (attr(t, "timestep").unwrap(), attr(t, "file").unwrap()))
+            .collect();
+        assert!(!listed.is_empty(), "{series}.pvd lists no frame");
+        for (_, file) in &listed {
+            let path = dir.join(file);
+            assert!(path.is_file(), "{file} listed but missing");
+            let parallel = ranks > 1 && series != "bodies";
+            assert_eq!(file.ends_with(".pvtu"), parallel, "{file}");
+            if parallel {
+                let text = std::fs::read_to_string(&path).unwrap();
+                let pieces: Vec<String> = text
+                    .split("<Piece")
+                    .skip(1)
+                    .map(|t| attr(t, "Source").unwrap())
+                    .collect();
+                assert_eq!(pieces.len(), ranks, "{file}");
+                for p in pieces {
+                    assert!(
+                        dir.join("vtk").join(&p).is_file(),
+                        "{file}: piece {p} missing"
+                    );
+                }
+            }
+        }
+        if series == "grains" {
+            grains = listed.into_iter().map(|(t, _)| t).collect();
+        }
+    }
+    grains
+}
+
 /// The pile (3,000 steps), decomposed 3x1x1 and 2x2x1, on 2 and 3 ranks: one process's digest; rank 0
 /// alone writes the folder and reports the time spent sharing.
 #[test]
@@ -117,6 +165,8 @@ fn pile_on_ranks_equals_one_process() {
             "the pile is loaded: {s}"
         );
         assert_eq!(digest(&alone), digest(&split), "{parts} on {ranks} ranks");
+        // The same frames, whole files alone and one piece per rank on the ranks.
+        assert_eq!(frames(&alone, 1), frames(&split, ranks), "{parts}");
         assert_eq!(summary(&split)["ranks"], ranks);
         assert_eq!(s["ranks"], 1);
         let comm = summary(&split)["timings_s"]["communication"]
@@ -133,7 +183,15 @@ fn pile_on_ranks_equals_one_process() {
 #[test]
 fn tamping_on_ranks_equals_one_process_and_resumes() {
     let root = tmp("track");
-    let track = example("examples/python/small_track.toml");
+    // The CI-sized track with a ParaView frame every 150 steps.
+    let text = std::fs::read_to_string(example("examples/python/small_track.toml")).unwrap();
+    assert!(text.contains("vtk_interval = 0"));
+    let track = root.join("track.toml");
+    std::fs::write(
+        &track,
+        text.replace("vtk_interval = 0", "vtk_interval = 150"),
+    )
+    .unwrap();
     let track = track.to_str().unwrap();
     let dir = |n: &str| root.join(n).to_str().unwrap().to_string();
     let (alone, split, resumed) = (dir("alone"), dir("split"), dir("resumed"));
@@ -162,6 +220,12 @@ fn tamping_on_ranks_equals_one_process_and_resumes() {
     };
     assert_eq!(bed(&cache1), bed(&cache2));
     assert_eq!(digest(Path::new(&alone)), digest(Path::new(&split)));
+    assert_eq!(frames(Path::new(&alone), 1), frames(Path::new(&split), 2));
+    assert_eq!(
+        frames(Path::new(&split), 2).len(),
+        5,
+        "frames at 0, 150, …, 600"
+    );
     // Stopped at step 300 (a checkpoint), then continued to 600 on 2 ranks.
     ok(ballast(Some(2), &args(&resumed, "300", &cache2)));
     let resume: Vec<String> = ["run", "--resume", &resumed, "--steps", "600"]
@@ -171,6 +235,8 @@ fn tamping_on_ranks_equals_one_process_and_resumes() {
         .collect();
     ok(ballast(Some(2), &resume));
     assert_eq!(digest(Path::new(&alone)), digest(Path::new(&resumed)));
+    // The resumed folder's frames are the uninterrupted run's, each with its pieces.
+    assert_eq!(frames(Path::new(&split), 2), frames(Path::new(&resumed), 2));
     let _ = std::fs::remove_dir_all(&root);
 }
 

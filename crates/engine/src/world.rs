@@ -550,6 +550,16 @@ impl World {
         self.exchange.as_ref().map_or(1, |e| e.size())
     }
 
+    /// This process's rank among [`World::ranks`] (0 when it solves alone).
+    pub fn rank(&self) -> usize {
+        self.exchange.as_ref().map_or(0, |e| e.rank())
+    }
+
+    /// The ranks' collective, when this world's solves are shared.
+    pub(crate) fn exchange(&self) -> Option<&dyn Exchange> {
+        self.exchange.as_deref()
+    }
+
     /// Frees the step pipeline's buffers (local problems, solver bodies, detection output,
     /// domain-decomposition workspace: about 0.5 kB per contact point), as Rapier's pipeline
     /// can be dropped: the next step rebuilds them from the state, with the same result bit

@@ -2,7 +2,8 @@
 //! in-process ranks ([`ThreadRanks`]), each stepping its own copy of a scene, give on every
 //! rank the bodies, impulses, sweep counts and residuals of one process with the same
 //! partition, bit for bit — with compliant contacts and the overlap correction, with a
-//! force-limited drive, with the interface solved in one group, for K = 2, 3, 4.
+//! force-limited drive, with the interface solved in one group, for K = 2, 3, 4; and the
+//! ParaView frames they write in pieces, grains changing rank as the pile settles.
 
 mod common;
 
@@ -179,4 +180,186 @@ fn one_interface_group_on_ranks_is_bit_identical() {
         600,
         &[2],
     );
+}
+
+/// The cell data array `name` (Int32) of a `.vtu` written by the VTK writer: its appended,
+/// zlib-compressed block (VTK's layout: block count, block size, last block's size, the
+/// compressed sizes, then the blocks) inflated.
+fn int32_array(path: &std::path::Path, name: &str) -> Vec<i32> {
+    use std::io::Read;
+    let bytes = std::fs::read(path).unwrap();
+    let text = String::from_utf8_lossy(&bytes);
+    let tag = format!("Name=\"{name}\"");
+    let at = text
+        .find(&tag)
+        .unwrap_or_else(|| panic!("{path:?}: no {name}"));
+    let offset: usize = text[at..]
+        .split("offset=\"")
+        .nth(1)
+        .and_then(|s| s.split('"').next())
+        .and_then(|s| s.parse().ok())
+        .unwrap();
+    let start = bytes.windows(2).position(|w| w == b" _").unwrap() + 2 + offset;
+    let word = |k: usize| {
+        u64::from_le_bytes(bytes[start + 8 * k..start + 8 * k + 8].try_into().unwrap()) as usize
+    };
+    let blocks = word(0);
+    let mut at = start + 8 * (3 + blocks);
+    let mut raw = Vec::new();
+    for b in 0..blocks {
+        let size = word(3 + b);
+        flate2::read::ZlibDecoder::new(&bytes[at..at + size])
+            .read_to_end(&mut raw)
+            .unwrap();
+        at += size;
+    }
+    raw.chunks(4)
+        .map(|c| i32::from_le_bytes(c.try_into().unwrap()))
+        .collect()
+}
+
+/// The Int32 array `name` of each piece a parallel file (`dir/vtk/….pvtu`) names.
+fn pieces(dir: &std::path::Path, pvtu: &str, name: &str) -> Vec<Vec<i32>> {
+    let text = std::fs::read_to_string(dir.join(pvtu)).unwrap();
+    text.split("Source=\"")
+        .skip(1)
+        .map(|s| int32_array(&dir.join("vtk").join(s.split('"').next().unwrap()), name))
+        .collect()
+}
+
+/// Frames written on K in-process ranks: each rank writes the grains and contacts it owns as
+/// pieces, rank 0 the parallel files and the collections. Every frame's pieces hold the
+/// grains and contacts of one process's frame, each once; grains move from one rank's pieces
+/// to another's as the pile settles (the partition follows them), and the run stays
+/// bit-identical while they do.
+#[test]
+fn frames_in_pieces_hold_one_process_frame() {
+    use ballast_engine::output::vtk::VtkWriter;
+    let root = std::env::temp_dir().join(format!("ballast-pieces-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let (steps, every) = (600, 100);
+    let make = || pile([2, 2, 1], true, false);
+    let alone_dir = root.join("alone");
+    let mut alone = make();
+    let mut writer = VtkWriter::new(&alone_dir).unwrap();
+    writer.write_frame(&alone).unwrap();
+    let mut contacts_alone = vec![alone.contacts.len()];
+    for s in 1..=steps {
+        alone.step();
+        if s % every == 0 {
+            writer.write_frame(&alone).unwrap();
+            contacts_alone.push(alone.contacts.len());
+        }
+    }
+    let grains = alone
+        .bodies
+        .kind
+        .iter()
+        .filter(|k| **k == BodyKind::Dynamic)
+        .count();
+    for k in [2, 3] {
+        let dir = root.join(format!("ranks-{k}"));
+        let handles: Vec<_> = ThreadRanks::group(k)
+            .into_iter()
+            .map(|r| {
+                let dir = dir.clone();
+                std::thread::spawn(move || {
+                    let mut w = make();
+                    let rank = r.rank();
+                    w.set_exchange(Some(Arc::new(r)));
+                    let mut writer = VtkWriter::new_on(&dir, rank, k).unwrap();
+                    writer.write_frame(&w).unwrap();
+                    for s in 1..=steps {
+                        w.step();
+                        if s % every == 0 {
+                            writer.write_frame(&w).unwrap();
+                        }
+                    }
+                    state_digest(&w.bodies)
+                })
+            })
+            .collect();
+        for h in handles {
+            assert_eq!(h.join().unwrap(), state_digest(&alone.bodies), "{k} ranks");
+        }
+        let pvd = std::fs::read_to_string(dir.join("grains.pvd")).unwrap();
+        let frames: Vec<&str> = pvd
+            .split("file=\"")
+            .skip(1)
+            .map(|s| s.split('"').next().unwrap())
+            .collect();
+        assert_eq!(frames.len(), steps / every + 1, "{k} ranks: {pvd}");
+        let mut owner_of = vec![Vec::new(); alone.bodies.len()];
+        for (f, file) in frames.iter().enumerate() {
+            assert!(file.ends_with(".pvtu"), "{file}");
+            // A grain's faces are consecutive cells, each with its id.
+            let mut ps = pieces(&dir, file, "id");
+            ps.iter_mut().for_each(|ids| ids.dedup());
+            assert_eq!(ps.len(), k, "{file}");
+            let mut all: Vec<i32> = ps.concat();
+            all.sort_unstable();
+            let n = all.len();
+            all.dedup();
+            assert_eq!(
+                (n, all.len()),
+                (grains, grains),
+                "{k} ranks, {file}: each grain once"
+            );
+            for (r, ids) in ps.iter().enumerate() {
+                for &i in ids {
+                    owner_of[i as usize].push(r);
+                }
+            }
+            let contacts: usize = pieces(&dir, &file.replace("grains", "contacts"), "body1")
+                .iter()
+                .map(Vec::len)
+                .sum();
+            assert_eq!(contacts, contacts_alone[f], "{k} ranks, {file}: contacts");
+        }
+        let moved = owner_of
+            .iter()
+            .filter(|o| o.windows(2).any(|w| w[0] != w[1]))
+            .count();
+        assert!(
+            moved > 0,
+            "{k} ranks: no grain changed rank in {} frames",
+            frames.len()
+        );
+        println!("{k} ranks: {moved} of {grains} grains changed rank between frames");
+    }
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A rank that cannot write its piece (a folder stands where its file goes) fails the frame
+/// on every rank, naming it; nothing reaches the collection, and no rank waits for ever.
+#[test]
+fn a_piece_that_cannot_be_written_fails_the_frame_on_every_rank() {
+    use ballast_engine::output::vtk::VtkWriter;
+    let dir = std::env::temp_dir().join(format!("ballast-piece-fail-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("vtk/grains_000000_1.vtu")).unwrap();
+    let handles: Vec<_> = ThreadRanks::group(2)
+        .into_iter()
+        .map(|r| {
+            let dir = dir.clone();
+            std::thread::spawn(move || {
+                let mut w = pile([2, 2, 1], true, false);
+                let rank = r.rank();
+                w.set_exchange(Some(Arc::new(r)));
+                let mut writer = VtkWriter::new_on(&dir, rank, 2).unwrap();
+                writer.write_frame(&w).map_err(|e| e.to_string())
+            })
+        })
+        .collect();
+    let errors: Vec<String> = handles
+        .into_iter()
+        .map(|h| h.join().unwrap().unwrap_err())
+        .collect();
+    assert!(errors[0].contains("rank(s) [1]"), "{}", errors[0]);
+    assert!(errors[1].contains("grains_000000_1.vtu"), "{}", errors[1]);
+    assert!(
+        !dir.join("grains.pvd").exists(),
+        "a failed frame reached the collection"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -802,7 +802,8 @@ impl Job {
             )
             .map_err(quality_error)?;
             let q = SeriesFile::open(&quality_path).map_err(quality_error)?;
-            let vtk = VtkWriter::resume(out, world.time).map_err(named_write_error)?;
+            let vtk = VtkWriter::resume_on(out, world.time, world.rank(), world.ranks())
+                .map_err(named_write_error)?;
             (f, q, vtk)
         } else {
             claim_folder(out, o.overwrite, names)?;
@@ -815,7 +816,8 @@ impl Job {
             write_atomic(&quality_path, format!("{QUALITY_HEADER}\n").as_bytes())
                 .map_err(quality_error)?;
             let q = SeriesFile::open(&quality_path).map_err(quality_error)?;
-            let mut vtk = VtkWriter::new(out).map_err(named_write_error)?;
+            let mut vtk =
+                VtkWriter::new_on(out, world.rank(), world.ranks()).map_err(named_write_error)?;
             if vtk_interval > 0 {
                 vtk.write_frame(world).map_err(named_write_error)?;
             }
@@ -989,20 +991,30 @@ impl Job {
         observer: &mut dyn Observer,
     ) -> Result<RunOutcome, Failure> {
         let (out, names) = (o.out, o.names);
+        let vtk_interval = self.vtk_interval;
         let world = &mut self.world;
-        if o.resume {
+        let (rank, ranks) = (world.rank(), world.ranks());
+        let frame_error = |e: std::io::Error| Failure::Io(format!("cannot write a VTK frame: {e}"));
+        let mut vtk = if o.resume {
             let scan = newest_valid_checkpoint(&out.join("checkpoints"), world)
                 .map_err(|e| format!("{}: {e}", (names.resume)(out)))?;
             let Some(r) = scan.resumed else {
                 return Err(format!("{}: no valid checkpoint", (names.resume)(out)).into());
             };
             self.stats = r.stats.unwrap_or_default();
+            VtkWriter::resume_on(out, world.time, rank, ranks).map_err(frame_error)?
         } else {
             self.stats = RunStats::default();
-        }
+            VtkWriter::new_on(out, rank, ranks).map_err(frame_error)?
+        };
         let steps = o.steps.unwrap_or(self.steps);
+        // Frames at the steps rank 0 writes them (each rank writes its pieces).
+        let frame_at = |k: u64| vtk_interval > 0 && (k.is_multiple_of(vtk_interval) || k == steps);
         observer.start(steps.saturating_sub(world.step_index));
         if world.step_index == 0 {
+            if !o.resume && vtk_interval > 0 {
+                vtk.write_frame(world).map_err(frame_error)?;
+            }
             world.detect();
             if let Err(d) = self.health.initial().check(world) {
                 return Err(diverged(&d, out, names));
@@ -1013,6 +1025,9 @@ impl Job {
             self.stats.add(&r);
             if let Err(d) = self.health.check(world) {
                 return Err(diverged(&d, out, names));
+            }
+            if frame_at(r.step) {
+                vtk.write_frame(world).map_err(frame_error)?;
             }
             if observer.stop_requested() && world.step_index < steps {
                 break;

@@ -27,6 +27,20 @@
 //!
 //! Every `.vtu` also holds the field `TimeValue` (Float64), for files opened on their own.
 //!
+//! # Parallel pieces
+//!
+//! A world whose solves are shared between ranks ([`World::ranks`] > 1, see
+//! [`crate::solver::exchange`]) writes each frame of `grains` and `contacts` as pieces: rank
+//! `R` writes `vtk/grains_NNNNNN_R.vtu` with the grains it owns (those of the subdomains it
+//! owns, [`crate::solver::exchange::owner`], in the frame's partition of the scene) and
+//! `vtk/contacts_NNNNNN_R.vtu` with the contacts whose first dynamic body it owns; rank 0
+//! writes the parallel file `vtk/grains_NNNNNN.pvtu` (`PUnstructuredGrid`) naming the pieces,
+//! which the `.pvd` lists, and `bodies` as one `.vtu` (the driven and fixed bodies are known to
+//! every rank). Which rank owns a grain depends on the scene alone, and it changes as grains
+//! cross from one rank's subdomains to another's. A frame reaches the `.pvd` only once every
+//! rank has written its pieces; a rank that cannot write ends the frame with an error on every
+//! rank, naming it.
+//!
 //! Format: `UnstructuredGrid` version 1.0, little-endian, `header_type="UInt64"`, all arrays in
 //! one raw (not base64) `<AppendedData>` block, each compressed with zlib
 //! (`compressor="vtkZLibDataCompressor"`: VTK's own compressed layout, read by ParaView/VTK and
@@ -42,6 +56,7 @@ use crate::bodies::BodyKind;
 use crate::laws::ContactStatus;
 use crate::math::{DMat3, DVec3};
 use crate::shapes::{ConvexPolyhedron, Shape};
+use crate::solver::partition::STATIC;
 use crate::world::World;
 use flate2::write::ZlibEncoder;
 use flate2::Compression;
@@ -79,6 +94,10 @@ pub struct VtkWriter {
     series: [Vec<Frame>; 3],
     /// Number of the next frame file.
     next: usize,
+    /// This writer's rank and the number of ranks writing the frames' pieces (0 and 1: one
+    /// process, whole files).
+    rank: usize,
+    ranks: usize,
 }
 
 impl VtkWriter {
@@ -86,12 +105,29 @@ impl VtkWriter {
     /// files are replaced at the first [`write_frame`](Self::write_frame); use
     /// [`resume`](Self::resume) to continue them.
     pub fn new(dir: &Path) -> io::Result<Self> {
-        let sub = dir.join(SUBDIR);
-        std::fs::create_dir_all(&sub).map_err(|e| naming(&sub, e))?;
+        Self::new_on(dir, 0, 1)
+    }
+
+    /// A writer of rank `rank` of `ranks` (see [Parallel pieces](self#parallel-pieces)); one
+    /// rank is [`new`](Self::new). Only rank 0 creates `dir/vtk/` here (the other ranks write
+    /// into it once rank 0 has reached the frame: a folder it is still claiming stays its own).
+    pub fn new_on(dir: &Path, rank: usize, ranks: usize) -> io::Result<Self> {
+        if rank >= ranks.max(1) {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("VTK writer: rank {rank} of {ranks}"),
+            ));
+        }
+        if rank == 0 {
+            let sub = dir.join(SUBDIR);
+            std::fs::create_dir_all(&sub).map_err(|e| naming(&sub, e))?;
+        }
         Ok(Self {
             dir: dir.to_path_buf(),
             series: Default::default(),
             next: 0,
+            rank,
+            ranks: ranks.max(1),
         })
     }
 
@@ -106,33 +142,29 @@ impl VtkWriter {
     /// I/O errors, and [`io::ErrorKind::InvalidData`] for a `.pvd` this writer cannot parse;
     /// every error of this writer names its file.
     pub fn resume(dir: &Path, up_to_time: f64) -> io::Result<Self> {
-        let mut writer = Self::new(dir)?;
+        Self::resume_on(dir, up_to_time, 0, 1)
+    }
+
+    /// [`resume`](Self::resume) for rank `rank` of `ranks`: rank 0 rewrites the `.pvd` files
+    /// and deletes the later frames (a parallel file with its pieces); the other ranks only
+    /// read the collections, to number their next pieces as rank 0 numbers its frames.
+    pub fn resume_on(dir: &Path, up_to_time: f64, rank: usize, ranks: usize) -> io::Result<Self> {
+        let mut writer = Self::new_on(dir, rank, ranks)?;
         for (k, name) in SERIES.iter().enumerate() {
             let mut frames = read_pvd(&writer.pvd_path(name))?;
             let keep = frames.iter().take_while(|f| f.time <= up_to_time).count();
             for dropped in frames.drain(keep..) {
-                // Only files this writer names, never a path leaving the folder.
-                let f = &dropped.file;
-                if f.starts_with("vtk/") && f.ends_with(".vtu") && !f.contains("..") {
-                    match std::fs::remove_file(dir.join(f)) {
-                        Err(e) if e.kind() != io::ErrorKind::NotFound => {
-                            return Err(naming(&dir.join(f), e))
-                        }
-                        _ => {}
-                    }
+                if rank == 0 {
+                    remove_frame_file(dir, &dropped.file)?;
                 }
             }
             writer.series[k] = frames;
         }
-        // After the highest kept number, so no kept file is ever overwritten.
-        writer.next = writer
-            .series
-            .iter()
-            .flatten()
-            .map(|f| frame_number(&f.file).map_or(0, |n| n + 1))
-            .chain(writer.series.iter().map(Vec::len))
-            .max()
-            .unwrap_or(0);
+        if rank != 0 {
+            writer.next = next_number(&writer.series);
+            return Ok(writer);
+        }
+        writer.next = next_number(&writer.series);
         for (k, name) in SERIES.iter().enumerate() {
             writer.write_pvd(k, name)?;
         }
@@ -145,6 +177,19 @@ impl VtkWriter {
     /// far with its physical time. A frame at the same time as the previous one replaces it,
     /// so the collection times stay strictly increasing.
     pub fn write_frame(&mut self, world: &World) -> io::Result<()> {
+        if world.ranks() != self.ranks {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "VTK writer of {} rank(s) given a world shared between {}",
+                    self.ranks,
+                    world.ranks()
+                ),
+            ));
+        }
+        if self.ranks > 1 {
+            return self.write_pieces(world);
+        }
         let time = world.time;
         let mut appended = false;
         for (k, name) in SERIES.iter().enumerate() {
@@ -154,9 +199,9 @@ impl VtkWriter {
             };
             let path = self.dir.join(&file);
             match k {
-                0 => write_bodies(&path, world, false),
-                1 => write_bodies(&path, world, true),
-                _ => write_contacts(&path, world),
+                0 => write_bodies(&path, world, false, &|_| true),
+                1 => write_bodies(&path, world, true, &|_| true),
+                _ => write_contacts(&path, world, &|_| true),
             }
             .map_err(|e| naming(&path, e))?;
             // Listed only once written, so a failed write never reaches a `.pvd`.
@@ -170,6 +215,81 @@ impl VtkWriter {
         }
         for (k, name) in SERIES.iter().enumerate() {
             self.write_pvd(k, name)?;
+        }
+        Ok(())
+    }
+
+    /// [`write_frame`](Self::write_frame) over ranks: every rank writes its pieces, rank 0
+    /// the bodies, the parallel files and the collections once all pieces are written.
+    fn write_pieces(&mut self, world: &World) -> io::Result<()> {
+        let time = world.time;
+        // Every rank at this frame before any writes: rank 0 has claimed the folder.
+        agree(world, true);
+        let owners = Owners::of(world, self.ranks);
+        let rank = self.rank;
+        let mut files = Vec::with_capacity(SERIES.len());
+        let mut mine: io::Result<Vec<PArray>> = Ok(Vec::new());
+        let mut declared = [Vec::new(), Vec::new(), Vec::new()];
+        for (k, name) in SERIES.iter().enumerate() {
+            let (file, new) = match self.series[k].last() {
+                Some(last) if last.time == time => (last.file.clone(), false),
+                _ if k == 1 => (format!("{SUBDIR}/{name}_{:06}.vtu", self.next), true),
+                _ => (format!("{SUBDIR}/{name}_{:06}.pvtu", self.next), true),
+            };
+            if mine.is_ok() {
+                let written = match k {
+                    1 if rank == 0 => {
+                        let path = self.dir.join(&file);
+                        write_bodies(&path, world, true, &|_| true).map_err(|e| naming(&path, e))
+                    }
+                    1 => Ok(Vec::new()),
+                    _ => {
+                        let path = self.dir.join(piece_file(&file, rank));
+                        if k == 0 {
+                            write_bodies(&path, world, false, &|i| owners.body[i] == rank)
+                        } else {
+                            write_contacts(&path, world, &|c| owners.contact(world, c) == rank)
+                        }
+                        .map_err(|e| naming(&path, e))
+                    }
+                };
+                match written {
+                    Ok(arrays) => declared[k] = arrays,
+                    Err(e) => mine = Err(e),
+                }
+            }
+            files.push((file, new));
+        }
+        let failed: Vec<usize> = agree(world, mine.is_ok())
+            .iter()
+            .enumerate()
+            .filter(|(_, &ok)| !ok)
+            .map(|(r, _)| r)
+            .collect();
+        mine?;
+        if !failed.is_empty() {
+            return Err(io::Error::other(format!(
+                "frame at t = {time} s: rank(s) {failed:?} could not write their pieces"
+            )));
+        }
+        let mut appended = false;
+        for (k, (file, new)) in files.into_iter().enumerate() {
+            if rank == 0 && k != 1 {
+                let path = self.dir.join(&file);
+                write_pvtu(&path, &declared[k], self.ranks).map_err(|e| naming(&path, e))?;
+            }
+            if new {
+                self.series[k].push(Frame { time, file });
+                appended = true;
+            }
+        }
+        if appended {
+            self.next += 1;
+        }
+        if rank == 0 {
+            for (k, name) in SERIES.iter().enumerate() {
+                self.write_pvd(k, name)?;
+            }
         }
         Ok(())
     }
@@ -233,10 +353,178 @@ fn attribute<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
     Some(&tag[start..start + len])
 }
 
-/// `N` of `vtk/<series>_N.vtu`.
+/// `N` of `vtk/<series>_N.vtu` or `vtk/<series>_N.pvtu`.
 fn frame_number(file: &str) -> Option<usize> {
-    let stem = file.strip_suffix(".vtu")?;
+    let stem = file
+        .strip_suffix(".pvtu")
+        .or_else(|| file.strip_suffix(".vtu"))?;
     stem[stem.rfind('_')? + 1..].parse().ok()
+}
+
+/// The number of the next frame: after the highest kept number, so no kept file is ever
+/// overwritten.
+fn next_number(series: &[Vec<Frame>; 3]) -> usize {
+    series
+        .iter()
+        .flatten()
+        .map(|f| frame_number(&f.file).map_or(0, |n| n + 1))
+        .chain(series.iter().map(Vec::len))
+        .max()
+        .unwrap_or(0)
+}
+
+/// Rank `rank`'s piece of the parallel file `vtk/<series>_N.pvtu`: `vtk/<series>_N_<rank>.vtu`.
+fn piece_file(file: &str, rank: usize) -> String {
+    format!("{}_{rank}.vtu", file.strip_suffix(".pvtu").unwrap_or(file))
+}
+
+/// Whether `file` (relative to the output folder) is one this writer names: in `vtk/`, a
+/// `.vtu` or `.pvtu`, never a path leaving the folder.
+fn is_own_file(file: &str) -> bool {
+    file.starts_with("vtk/")
+        && (file.ends_with(".vtu") || file.ends_with(".pvtu"))
+        && !file.contains("..")
+}
+
+/// Deletes a dropped frame's file, and the pieces a parallel file names.
+fn remove_frame_file(dir: &Path, file: &str) -> io::Result<()> {
+    if !is_own_file(file) {
+        return Ok(());
+    }
+    let mut doomed = Vec::new();
+    if file.ends_with(".pvtu") {
+        if let Ok(text) = std::fs::read_to_string(dir.join(file)) {
+            for chunk in text.split("<Piece").skip(1) {
+                let tag = &chunk[..chunk.find('>').unwrap_or(chunk.len())];
+                if let Some(source) = attribute(tag, "Source") {
+                    let piece = format!("{SUBDIR}/{source}");
+                    if is_own_file(&piece) && !source.contains('/') {
+                        doomed.push(piece);
+                    }
+                }
+            }
+        }
+    }
+    doomed.push(file.to_string());
+    for f in doomed {
+        match std::fs::remove_file(dir.join(&f)) {
+            Err(e) if e.kind() != io::ErrorKind::NotFound => return Err(naming(&dir.join(&f), e)),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// Every rank's `ok`, gathered in rank order (a collective: every rank calls it at the same
+/// point of a frame).
+fn agree(world: &World, ok: bool) -> Vec<bool> {
+    let Some(ex) = world.exchange() else {
+        return vec![ok];
+    };
+    let size = ex.size();
+    let mut all = vec![0.0; size];
+    ex.all_gather(&[f64::from(u8::from(ok))], &vec![1; size], &mut all);
+    all.into_iter().map(|x| x == 1.0).collect()
+}
+
+/// The rank that owns each body in a frame: a dynamic body (or a force-limited driven one)
+/// belongs to the owner of its subdomain in the partition of the scene as it is
+/// ([`World::partition`]); without domain decomposition, to contiguous blocks of body
+/// indices. Other bodies: rank 0.
+struct Owners {
+    body: Vec<usize>,
+}
+
+impl Owners {
+    fn of(world: &World, ranks: usize) -> Self {
+        let n = world.bodies.len();
+        let body = match &world.settings.ddm {
+            Some(d) => {
+                let p = world.partition(d);
+                let count: usize = p.dims.iter().product();
+                p.subdomain
+                    .iter()
+                    .map(|&s| {
+                        if s == STATIC {
+                            0
+                        } else {
+                            crate::solver::exchange::owner(s as usize, count, ranks)
+                        }
+                    })
+                    .collect()
+            }
+            None => (0..n)
+                .map(|i| {
+                    if world.bodies.kind[i] == BodyKind::Dynamic {
+                        i * ranks / n.max(1)
+                    } else {
+                        0
+                    }
+                })
+                .collect(),
+        };
+        Owners { body }
+    }
+
+    /// Contact `c` belongs to the owner of its first dynamic body.
+    fn contact(&self, world: &World, c: usize) -> usize {
+        let (b1, b2) = (
+            world.contacts.body1[c] as usize,
+            world.contacts.body2[c] as usize,
+        );
+        if world.bodies.kind[b1] == BodyKind::Dynamic {
+            self.body[b1]
+        } else {
+            self.body[b2]
+        }
+    }
+}
+
+/// An array as a parallel file declares it.
+#[derive(Clone, Debug)]
+struct PArray {
+    section: Section,
+    name: &'static str,
+    ty: Type,
+    components: usize,
+}
+
+/// Writes a `PUnstructuredGrid` naming the pieces `<stem>_0.vtu` … `<stem>_{ranks−1}.vtu`
+/// next to it, with the point and cell arrays every piece holds.
+fn write_pvtu(path: &Path, arrays: &[PArray], ranks: usize) -> io::Result<()> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| io::Error::other("parallel file without a name"))?;
+    let section = |s: Section, open: &str, close: &str| {
+        let mut x = format!("    <{open}>\n");
+        for a in arrays.iter().filter(|a| a.section == s) {
+            let components = if a.components > 1 {
+                format!(" NumberOfComponents=\"{}\"", a.components)
+            } else {
+                String::new()
+            };
+            x += &format!(
+                "      <PDataArray type=\"{}\" Name=\"{}\"{components}/>\n",
+                a.ty.name(),
+                a.name
+            );
+        }
+        x + "    </" + close + ">\n"
+    };
+    let mut xml = String::from(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"PUnstructuredGrid\" version=\"1.0\" \
+         byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  \
+         <PUnstructuredGrid GhostLevel=\"0\">\n",
+    );
+    xml += &section(Section::Point, "PPointData", "PPointData");
+    xml += &section(Section::Cell, "PCellData", "PCellData");
+    xml += &section(Section::Points, "PPoints", "PPoints");
+    for r in 0..ranks {
+        xml += &format!("    <Piece Source=\"{}\"/>\n", piece_file(name, r));
+    }
+    xml += "  </PUnstructuredGrid>\n</VTKFile>\n";
+    write_atomic(path, xml.as_bytes())
 }
 
 /// One body's surface in world coordinates.
@@ -287,12 +575,17 @@ fn scene_box(world: &World) -> Option<(DVec3, f64)> {
     (lo.x <= hi.x).then(|| ((lo + hi) * 0.5, (hi - lo).length()))
 }
 
-/// Surfaces of the dynamic bodies (`others == false`) or of the other bodies, with their index.
-fn surfaces(world: &World, others: bool) -> Vec<(usize, Surface<'_>)> {
+/// Surfaces of the dynamic bodies (`others == false`) or of the other bodies, those `keep`
+/// takes, with their index.
+fn surfaces<'w>(
+    world: &'w World,
+    others: bool,
+    keep: &dyn Fn(usize) -> bool,
+) -> Vec<(usize, Surface<'w>)> {
     let b = &world.bodies;
     let scene = scene_box(world);
     (0..b.len())
-        .filter(|&i| (b.kind[i] != BodyKind::Dynamic) == others)
+        .filter(|&i| (b.kind[i] != BodyKind::Dynamic) == others && keep(i))
         .map(|i| {
             let q = b.orientation[i];
             let surface = match &b.shape[i] {
@@ -335,10 +628,16 @@ fn per_face(
     Ok(())
 }
 
-/// Writes the grains file (`others == false`) or the other bodies' file.
-fn write_bodies(path: &Path, world: &World, others: bool) -> io::Result<()> {
+/// Writes the grains file (`others == false`) or the other bodies' file, with the bodies
+/// `keep` takes; returns the arrays as a parallel file declares them.
+fn write_bodies(
+    path: &Path,
+    world: &World,
+    others: bool,
+    keep: &dyn Fn(usize) -> bool,
+) -> io::Result<Vec<PArray>> {
     let b = &world.bodies;
-    let parts = surfaces(world, others);
+    let parts = surfaces(world, others, keep);
     let parts = &parts;
     let num_points: usize = parts.iter().map(|(_, s)| s.num_points()).sum();
     let num_cells: usize = parts.iter().map(|(_, s)| s.num_faces()).sum();
@@ -471,19 +770,27 @@ fn write_bodies(path: &Path, world: &World, others: bool) -> io::Result<()> {
     write_vtu(path, num_points, num_cells, &arrays)
 }
 
-/// Writes the contacts file.
-fn write_contacts(path: &Path, world: &World) -> io::Result<()> {
+/// Writes the contacts file with the contacts `keep` takes; returns the arrays as a parallel
+/// file declares them.
+fn write_contacts(
+    path: &Path,
+    world: &World,
+    keep: &dyn Fn(usize) -> bool,
+) -> io::Result<Vec<PArray>> {
     let c = &world.contacts;
-    let n = c.len();
+    let kept: Vec<usize> = (0..c.len()).filter(|&k| keep(k)).collect();
+    let kept = &kept;
+    let n = kept.len();
     let inv_h = 1.0 / world.settings.dt;
     let index = IndexType::for_sizes(n);
     let arrays = vec![
         Array::field_time(world.time),
         Array::new(Section::Point, "normal", Type::F32, 3, n, move |o| {
-            c.frame.iter().try_for_each(|f| o.vec3_f32(f[0]))
+            kept.iter().try_for_each(|&k| o.vec3_f32(c.frame[k][0]))
         }),
         Array::new(Section::Point, "normal_force", Type::F32, 3, n, move |o| {
-            (0..n).try_for_each(|k| o.vec3_f32(c.frame[k][0] * (c.impulse[k].x * inv_h)))
+            kept.iter()
+                .try_for_each(|&k| o.vec3_f32(c.frame[k][0] * (c.impulse[k].x * inv_h)))
         }),
         Array::new(
             Section::Point,
@@ -492,7 +799,7 @@ fn write_contacts(path: &Path, world: &World) -> io::Result<()> {
             3,
             n,
             move |o| {
-                (0..n).try_for_each(|k| {
+                kept.iter().try_for_each(|&k| {
                     let [_, t, s] = c.frame[k];
                     let r = c.impulse[k];
                     o.vec3_f32((t * r.y + s * r.z) * inv_h)
@@ -500,8 +807,8 @@ fn write_contacts(path: &Path, world: &World) -> io::Result<()> {
             },
         ),
         Array::new(Section::Point, "status", Type::I32, 1, n, move |o| {
-            c.status.iter().try_for_each(|s| {
-                o.i32(match s {
+            kept.iter().try_for_each(|&k| {
+                o.i32(match c.status[k] {
                     ContactStatus::NoContact => 0,
                     ContactStatus::Stick => 1,
                     ContactStatus::Slide => 2,
@@ -509,16 +816,16 @@ fn write_contacts(path: &Path, world: &World) -> io::Result<()> {
             })
         }),
         Array::new(Section::Point, "body1", Type::I32, 1, n, move |o| {
-            c.body1.iter().try_for_each(|&b| o.i32(b as i32))
+            kept.iter().try_for_each(|&k| o.i32(c.body1[k] as i32))
         }),
         Array::new(Section::Point, "body2", Type::I32, 1, n, move |o| {
-            c.body2.iter().try_for_each(|&b| o.i32(b as i32))
+            kept.iter().try_for_each(|&k| o.i32(c.body2[k] as i32))
         }),
         Array::new(Section::Point, "gap", Type::F64, 1, n, move |o| {
-            c.gap.iter().try_for_each(|&g| o.f64(g))
+            kept.iter().try_for_each(|&k| o.f64(c.gap[k]))
         }),
         Array::new(Section::Points, "Points", Type::F32, 3, n, move |o| {
-            c.point.iter().try_for_each(|&p| o.vec3_f32(p))
+            kept.iter().try_for_each(|&k| o.vec3_f32(c.point[k]))
         }),
         Array::new(Section::Cells, "connectivity", index.ty(), 1, n, move |o| {
             (0..n).try_for_each(|k| o.index(index, k))
@@ -723,7 +1030,12 @@ fn compress(data: &[u8]) -> io::Result<Vec<u8>> {
 /// Writes an `UnstructuredGrid` with every array in one appended block, each compressed (see
 /// [`compress`]): the arrays are filled and compressed first, so the XML header can give
 /// their offsets; the file is then written atomically (temporary file, then rename).
-fn write_vtu(path: &Path, num_points: usize, num_cells: usize, arrays: &[Array]) -> io::Result<()> {
+fn write_vtu(
+    path: &Path,
+    num_points: usize,
+    num_cells: usize,
+    arrays: &[Array],
+) -> io::Result<Vec<PArray>> {
     let mut packed = Vec::with_capacity(arrays.len());
     for a in arrays {
         let expected = a.num_bytes();
@@ -791,5 +1103,15 @@ fn write_vtu(path: &Path, num_points: usize, num_cells: usize, arrays: &[Array])
         file.extend_from_slice(p);
     }
     file.extend_from_slice(tail);
-    write_atomic(path, &file)
+    write_atomic(path, &file)?;
+    Ok(arrays
+        .iter()
+        .filter(|a| matches!(a.section, Section::Point | Section::Cell | Section::Points))
+        .map(|a| PArray {
+            section: a.section,
+            name: a.name,
+            ty: a.ty,
+            components: a.components,
+        })
+        .collect())
 }
