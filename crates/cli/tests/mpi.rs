@@ -1,8 +1,9 @@
 //! `mpirun -np K ballast run …` (the `mpi` feature; `.ci/run` installs Open MPI and runs
 //! these): a pile and the CI-sized tamping run give the `state_digest` of one process with the
 //! same partition on 2 and 3 ranks; a 2-rank run stopped at a step and resumed on 2 ranks
-//! equals the uninterrupted one (ParaView frames too: one piece per rank, the same frames); a
-//! rank that fails ends the job with an error, no hang.
+//! equals the uninterrupted one (ParaView frames too: one piece per rank, the same frames), and
+//! so does its checkpoint (written in parts) resumed by one process; a rank that fails ends
+//! the job with an error, no hang.
 #![cfg(feature = "mpi")]
 
 use std::path::{Path, PathBuf};
@@ -85,6 +86,20 @@ fn summary(dir: &Path) -> serde_json::Value {
 
 fn digest(dir: &Path) -> String {
     summary(dir)["state_digest"].as_str().unwrap().to_string()
+}
+
+/// Copies the files of folder `from` (and of its folders) into `to`.
+fn copy_tree(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_tree(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
 }
 
 /// The times of a run folder's frames (its `grains.pvd`), after checking that
@@ -228,6 +243,15 @@ fn tamping_on_ranks_equals_one_process_and_resumes() {
     );
     // Stopped at step 300 (a checkpoint), then continued to 600 on 2 ranks.
     ok(ballast(Some(2), &args(&resumed, "300", &cache2)));
+    // The checkpoint in parts: one per rank, and the manifest naming them.
+    let ckpt = Path::new(&resumed).join("checkpoints");
+    for f in ["", ".part0", ".part1"] {
+        let p = ckpt.join(format!("checkpoint_0000000300{f}.bin"));
+        assert!(p.is_file(), "{p:?} missing");
+    }
+    // Its copy continued by one process: a checkpoint in parts resumes on another count.
+    let alone_resumed = dir("alone-resumed");
+    copy_tree(Path::new(&resumed), Path::new(&alone_resumed));
     let resume: Vec<String> = ["run", "--resume", &resumed, "--steps", "600"]
         .iter()
         .chain(&["--cache", &cache2, "--subdomains", "2x1x1", "--quiet"])
@@ -235,6 +259,13 @@ fn tamping_on_ranks_equals_one_process_and_resumes() {
         .collect();
     ok(ballast(Some(2), &resume));
     assert_eq!(digest(Path::new(&alone)), digest(Path::new(&resumed)));
+    let resume_alone: Vec<String> = ["run", "--resume", &alone_resumed, "--steps", "600"]
+        .iter()
+        .chain(&["--cache", &cache2, "--subdomains", "2x1x1", "--quiet"])
+        .map(|s| s.to_string())
+        .collect();
+    ok(ballast(None, &resume_alone));
+    assert_eq!(digest(Path::new(&alone)), digest(Path::new(&alone_resumed)));
     // The resumed folder's frames are the uninterrupted run's, each with its pieces.
     assert_eq!(frames(Path::new(&split), 2), frames(Path::new(&resumed), 2));
     let _ = std::fs::remove_dir_all(&root);

@@ -733,17 +733,37 @@ fn checkpoints_cover_all_state_fields() {
     );
 }
 
-/// Version 1 to 4 files (written before the detection's anchor poses, the run's origin, the
-/// drives' work, resp. their lag were stored) still read: a version 1 run resumes with every
-/// body anchored anew at its first step, versions 1 and 2 are not checked against the initial
-/// state, and the drives start from no work done and no lag. The same bytes labelled an older version
-/// with the newer sections left in are refused as malformed, not misread.
+/// Version 1 to 5 files (written before the detection's anchor poses, the run's origin, the
+/// drives' work, their lag, resp. the parts field were stored) still read: a version 1 run
+/// resumes with every body anchored anew at its first step, versions 1 and 2 are not checked
+/// against the initial state, and the drives start from no work done and no lag. The same
+/// bytes labelled an older version with the newer sections left in are refused as malformed,
+/// not misread.
 #[test]
 fn older_version_files_still_read() {
     let s = scenario();
     let mut w = build(&s);
     run(&mut w, SPLIT, &mut RunStats::default());
-    let v5 = encode_checkpoint(&w, None);
+    let relabel = |mut b: Vec<u8>, version: u32| {
+        b[11..15].copy_from_slice(&version.to_le_bytes());
+        let payload = (b.len() - 23) as u64;
+        b[15..23].copy_from_slice(&payload.to_le_bytes());
+        b.extend_from_slice(&[0; 8]);
+        reseal(&mut b);
+        b
+    };
+    // Version 6 puts the parts count (u32 0: none) after the timers, whose last one (sorted by
+    // name) is `total`.
+    let v6 = encode_checkpoint(&w, None);
+    let total = [&5u64.to_le_bytes()[..], b"total"].concat();
+    let at = v6
+        .windows(total.len())
+        .position(|x| x == &total[..])
+        .expect("the timers end with `total`")
+        + total.len()
+        + 8;
+    assert_eq!(&v6[at..at + 4], &[0u8; 4], "no parts");
+    let v5 = relabel([&v6[..at], &v6[at + 4..v6.len() - 8]].concat(), 5);
     // Payload tail: anchor flag 1, n positions (24 bytes), n orientations (32 bytes), origin
     // flag 1 and its u64, the drive count 0 (this scene has no drive), the lag count 0, then
     // the statistics flag 0; then the checksum.
@@ -761,14 +781,6 @@ fn older_version_files_still_read() {
         ),
         (1, 1, &[0u8; 16][..], 0)
     );
-    let relabel = |mut b: Vec<u8>, version: u32| {
-        b[11..15].copy_from_slice(&version.to_le_bytes());
-        let payload = (b.len() - 23) as u64;
-        b[15..23].copy_from_slice(&payload.to_le_bytes());
-        b.extend_from_slice(&[0; 8]);
-        reseal(&mut b);
-        b
-    };
     let older = |cut: usize| {
         let mut b = v5[..end - 1 - cut].to_vec();
         b.push(0);
@@ -780,6 +792,7 @@ fn older_version_files_still_read() {
         (2, older(work + origin)),
         (3, older(work)),
         (4, older(lag)),
+        (5, older(0)),
     ] {
         let path = dir.join(format!("v{version}.bin"));
         write_bytes(&path, &relabel(bytes, version));
@@ -812,6 +825,15 @@ fn older_version_files_still_read() {
             "a version 5 payload read as version {version}: {e:?}"
         );
     }
+    let e = read_damaged(
+        &dir,
+        "mislabelled5.bin",
+        &relabel(v6[..v6.len() - 8].to_vec(), 5),
+    );
+    assert!(
+        matches!(e, CheckpointError::Corrupted { .. }),
+        "a version 6 payload read as version 5: {e:?}"
+    );
 }
 
 /// A checkpoint carries the state its run started from: the same scene started elsewhere (the

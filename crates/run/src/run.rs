@@ -10,7 +10,7 @@ use crate::report::write_run_report;
 use ballast_engine::health::{initial_warnings, Divergence, HealthCheck};
 use ballast_engine::output::checkpoint::{
     checkpoint_path, list_checkpoints, newest_valid_checkpoint, prune_checkpoints,
-    remove_partial_checkpoints, write_checkpoint_with_stats, Snapshot,
+    remove_partial_checkpoints, write_checkpoint_on_ranks, Snapshot,
 };
 use ballast_engine::output::vtk::VtkWriter;
 use ballast_engine::output::{
@@ -899,7 +899,7 @@ impl Job {
                 }
                 if checkpoint_interval > 0 && k % checkpoint_interval == 0 && k != steps {
                     let path = checkpoint_path(&ckpt_dir, k);
-                    write_checkpoint_with_stats(world, Some(stats), &path)
+                    write_checkpoint_on_ranks(world, Some(stats), &path)
                         .map_err(|e| write_error(&path, e))?;
                     prune_checkpoints(&ckpt_dir, KEEP_CHECKPOINTS).map_err(io)?;
                 }
@@ -926,7 +926,7 @@ impl Job {
             ));
         }
         let last = checkpoint_path(&ckpt_dir, world.step_index);
-        write_checkpoint_with_stats(world, Some(stats), &last).map_err(|e| {
+        write_checkpoint_on_ranks(world, Some(stats), &last).map_err(|e| {
             stopped(
                 write_error(&last, e).message(),
                 world.step_index,
@@ -982,7 +982,8 @@ impl Job {
 impl Job {
     /// What a rank other than 0 of a distributed run does instead of [`Job::run`]: the same
     /// steps from the same state (`o.resume`: the newest valid checkpoint in `o.out`, which
-    /// rank 0 reads too), writing nothing. Its world shares each solve with rank 0's, so the
+    /// rank 0 reads too), writing only its pieces of the ParaView frames and its parts of the
+    /// checkpoints, at the steps rank 0 writes them. Its world shares each solve with rank 0's, so the
     /// two must stop together: on the same divergence (the same state gives the same check),
     /// or when `observer` says so (the ranks' observers agree).
     pub fn follow(
@@ -991,10 +992,12 @@ impl Job {
         observer: &mut dyn Observer,
     ) -> Result<RunOutcome, Failure> {
         let (out, names) = (o.out, o.names);
-        let vtk_interval = self.vtk_interval;
+        let (vtk_interval, checkpoint_interval) = (self.vtk_interval, self.checkpoint_interval);
+        let ckpt_dir = out.join("checkpoints");
         let world = &mut self.world;
         let (rank, ranks) = (world.rank(), world.ranks());
         let frame_error = |e: std::io::Error| Failure::Io(format!("cannot write a VTK frame: {e}"));
+        let part_error = |e: std::io::Error| Failure::Io(format!("cannot write a checkpoint: {e}"));
         let mut vtk = if o.resume {
             let scan = newest_valid_checkpoint(&out.join("checkpoints"), world)
                 .map_err(|e| format!("{}: {e}", (names.resume)(out)))?;
@@ -1029,11 +1032,18 @@ impl Job {
             if frame_at(r.step) {
                 vtk.write_frame(world).map_err(frame_error)?;
             }
+            let k = r.step;
+            if checkpoint_interval > 0 && k.is_multiple_of(checkpoint_interval) && k != steps {
+                write_checkpoint_on_ranks(world, Some(&self.stats), &checkpoint_path(&ckpt_dir, k))
+                    .map_err(part_error)?;
+            }
             if observer.stop_requested() && world.step_index < steps {
                 break;
             }
         }
         observer.finish();
+        let last = checkpoint_path(&ckpt_dir, world.step_index);
+        write_checkpoint_on_ranks(world, Some(&self.stats), &last).map_err(part_error)?;
         let summary = summary_json(world, &self.stats, o.threads, &self.track, None, None)?;
         Ok(RunOutcome {
             summary,

@@ -20,7 +20,7 @@
 //!
 //! Every `f64` is stored as its exact IEEE-754 bits: a resumed run continues bit-identically.
 //!
-//! # File format, version 4 (versions 1 to 3 still read)
+//! # File format, version 6 (versions 1 to 5 still read)
 //!
 //! All integers little-endian; `f64` as the little-endian bytes of [`f64::to_bits`]; a vector is
 //! `x, y, z`; a quaternion is `x, y, z, w`. An "array" is a `u64` element count followed by the
@@ -47,6 +47,7 @@
 //! | bodies               | array of records: kind `u8` (0 dynamic, 1 kinematic, 2 fixed), group `u32`, inverse mass `f64`, principal inertia 3 × `f64`, shape hash `u64`, driver hash `u64` (0 = none) |
 //! | friction             | array of `(group a u32, group b u32, μ f64)`, `a ≤ b`, over the groups the bodies use |
 //! | *clock*              | time `f64`, step index `u64`, timers: array of (`u64` name length, UTF-8 name of a [`PhaseTimes`] field, `f64` seconds) |
+//! | *parts*              | `u32` `K` (version ≥ 6): 0, the bodies, contacts and anchors follow here; `K > 0`, they are in `K` part files (see [Parts](#parts-written-by-the-ranks)), and here follow instead `u64` body count, `u64` contact count, `u8` anchors flag and the `K` parts' `u64` checksums |
 //! | *bodies*             | `u64` count `n`, then field by field (structure of arrays, `n` values each): positions, orientations, velocities, angular velocities, angular momenta |
 //! | *contacts*           | `u64` count `m`, then field by field (`m` values each): body 1 `u32`, body 2 `u32`, point, frame (`n, t, s`: 3 vectors), gap `f64`, μ `f64`, impulse, status `u8` (0 no contact, 1 stick, 2 slide), local point |
 //! | *anchors*            | `u8` 0 (absent) or 1 then the `n` anchor positions, then the `n` anchor orientations (version ≥ 2; a version 1 file has no such field) |
@@ -73,6 +74,25 @@
 //! here (and [`FORMAT_VERSION`] bumped); the `checkpoints_cover_all_state_fields` test fails
 //! until a new field is classified.
 //!
+//! # Parts written by the ranks
+//!
+//! A world whose solves are shared between ranks ([`World::ranks`] > 1) is checkpointed in
+//! parts ([`write_checkpoint_on_ranks`]): rank `R` writes `checkpoint_<step>.part<R>.bin` with
+//! the states of the bodies it owns (those of its subdomains in the scene's partition; the
+//! driven and fixed bodies on rank 0), their anchor poses, and the contacts whose first dynamic
+//! body it owns, each record with its index; once every rank has written its part, rank 0
+//! writes `checkpoint_<step>.bin`, the manifest: the file above with `K` parts and their
+//! checksums in place of those arrays. A part has the same frame with the magic
+//! `BALLASTPART` and the payload: scene fingerprint `u64`, step `u64`, rank `u32`, ranks `u32`,
+//! body count `u64`, contact count `u64`; the part's bodies (array of `u32` indices, then
+//! field by field their positions, orientations, velocities, angular velocities, angular
+//! momenta), `u8` anchors flag then their anchor positions and orientations; its contacts
+//! (array of `u32` indices, then field by field as in the contacts section). Reading a
+//! manifest reads its parts, checks each against the checksum the manifest names, and puts
+//! the whole state back together: any number of ranks (one process too) resumes it, bit for
+//! bit. A manifest whose part is missing or damaged is damaged: a resume passes over it to the
+//! previous checkpoint.
+//!
 //! # Files in a run folder
 //!
 //! Checkpoints are named `checkpoint_<step:010>.bin` ([`checkpoint_path`]) and written through
@@ -90,13 +110,17 @@ use crate::output::{write_atomic, RunStats};
 use crate::shapes::Shape;
 use crate::timing::PhaseTimes;
 use crate::world::World;
+use parts::PartsSpec;
+pub use parts::{part_path, write_checkpoint_on_ranks};
 use std::fmt;
+
+mod parts;
 use std::path::{Path, PathBuf};
 
 /// The magic bytes every checkpoint starts with.
 pub const MAGIC: &[u8; 11] = b"BALLASTCKPT";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 /// The oldest format version this build still reads (version 1 has no anchor poses: a run
 /// resumed from it detects every pair anew at its first step).
 pub(crate) const OLDEST_VERSION: u32 = 1;
@@ -630,16 +654,26 @@ fn status_code(s: ContactStatus) -> u8 {
 
 /// The checkpoint of `world` (and optionally the run statistics) as bytes.
 pub fn encode_checkpoint(world: &World, stats: Option<&RunStats>) -> Vec<u8> {
+    encode_manifest(world, stats, &[])
+}
+
+/// The checkpoint of `world` whose bodies, contacts and anchors are in the parts of checksums
+/// `parts` (none: in the file).
+fn encode_manifest(world: &World, stats: Option<&RunStats>, parts: &[u64]) -> Vec<u8> {
     let mut scene = Enc::default();
     Scene::of(world).encode(&mut scene);
 
     let mut p = Enc::default();
     p.u64(fnv1a64(&scene.0));
     p.0.extend_from_slice(&scene.0);
-    encode_state(&mut p, world, stats);
+    encode_state_with(&mut p, world, stats, parts);
+    frame(MAGIC, p)
+}
 
+/// `payload` framed: magic, version, length, payload, checksum.
+fn frame(magic: &[u8; 11], p: Enc) -> Vec<u8> {
     let mut out = Enc(Vec::with_capacity(HEADER_LEN + p.0.len() + CHECKSUM_LEN));
-    out.0.extend_from_slice(MAGIC);
+    out.0.extend_from_slice(magic);
     out.u32(FORMAT_VERSION);
     out.len(p.0.len());
     out.0.extend_from_slice(&p.0);
@@ -651,10 +685,29 @@ pub fn encode_checkpoint(world: &World, stats: Option<&RunStats>) -> Vec<u8> {
 /// The state section of a checkpoint: clock, timers, body states, contacts, detection
 /// anchors, the run's origin and the statistics (everything after the scene).
 fn encode_state(p: &mut Enc, world: &World, stats: Option<&RunStats>) {
+    encode_state_with(p, world, stats, &[]);
+}
+
+/// [`encode_state`], with the bodies, contacts and anchors left to the parts of checksums
+/// `parts` when there are any.
+fn encode_state_with(p: &mut Enc, world: &World, stats: Option<&RunStats>, parts: &[u64]) {
     p.f64(world.time);
     p.u64(world.step_index);
     encode_timers(p, &world.timers);
+    p.u32(parts.len() as u32);
+    if parts.is_empty() {
+        encode_arrays(p, world);
+    } else {
+        p.len(world.bodies.len());
+        p.len(world.contacts.len());
+        p.u8(u8::from(parts::has_anchors(world)));
+        parts.iter().for_each(|&s| p.u64(s));
+    }
+    encode_tail(p, world, stats);
+}
 
+/// Body states, contacts and anchors, whole.
+fn encode_arrays(p: &mut Enc, world: &World) {
     let b = &world.bodies;
     p.len(b.len());
     b.position.iter().for_each(|&v| p.vec3(v));
@@ -683,7 +736,10 @@ fn encode_state(p: &mut Enc, world: &World, stats: Option<&RunStats>) {
     } else {
         p.u8(0);
     }
+}
 
+/// The run's origin, the drives' work and lag, and the statistics.
+fn encode_tail(p: &mut Enc, world: &World, stats: Option<&RunStats>) {
     match world.origin_digest() {
         Some(o) => {
             p.u8(1);
@@ -731,10 +787,14 @@ pub fn write_checkpoint_with_stats(
     stats: Option<&RunStats>,
     path: &Path,
 ) -> std::io::Result<()> {
-    write_atomic(path, &encode_checkpoint(world, stats))?;
-    // Make the rename itself durable, so that after a power cut the folder does not still
-    // name the previous (possibly pruned) file. Best effort: not every platform can sync a
-    // folder, and the data is already safe.
+    write_durably(path, &encode_checkpoint(world, stats))
+}
+
+/// [`write_atomic`], then the rename itself made durable, so that after a power cut the folder
+/// does not still name the previous (possibly pruned) file. Best effort: not every platform
+/// can sync a folder, and the data is already safe.
+fn write_durably(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_atomic(path, bytes)?;
     #[cfg(unix)]
     if let Some(dir) = path.parent() {
         let dir = if dir.as_os_str().is_empty() {
@@ -754,6 +814,8 @@ pub fn write_checkpoint_with_stats(
 
 /// A decoded checkpoint, not yet applied to a world.
 struct Decoded {
+    /// The scene section's fingerprint.
+    fingerprint: u64,
     scene: Scene,
     state: State,
 }
@@ -777,17 +839,28 @@ struct State {
     drive_work: Vec<(u32, f64)>,
     drive_lag: Vec<(u32, DVec3)>,
     stats: Option<RunStats>,
+    /// The parts holding the bodies, contacts and anchors, still to be read (version ≥ 6).
+    parts: Option<PartsSpec>,
 }
 
 /// Checks the frame (magic, length, checksum, version) and returns the payload.
 fn unframe<'a>(bytes: &'a [u8], path: &Path) -> Result<(&'a [u8], u32), CheckpointError> {
+    unframe_with(bytes, path, MAGIC)
+}
+
+/// [`unframe`] for a file of magic `magic`.
+fn unframe_with<'a>(
+    bytes: &'a [u8],
+    path: &Path,
+    magic: &[u8; 11],
+) -> Result<(&'a [u8], u32), CheckpointError> {
     let corrupted = |reason| CheckpointError::Corrupted {
         path: path.to_path_buf(),
         reason,
     };
     let len = bytes.len() as u64;
-    let m = bytes.len().min(MAGIC.len());
-    if bytes[..m] != MAGIC[..m] {
+    let m = bytes.len().min(magic.len());
+    if bytes[..m] != magic[..m] {
         return Err(CheckpointError::BadMagic {
             path: path.to_path_buf(),
         });
@@ -851,7 +924,11 @@ fn decode_payload(payload: &[u8], version: u32) -> DecResult<Decoded> {
             payload.len() - d.pos
         ));
     }
-    Ok(Decoded { scene, state })
+    Ok(Decoded {
+        fingerprint,
+        scene,
+        state,
+    })
 }
 
 /// Reads a state section written by [`encode_state`] (in format `version`) for `bodies`
@@ -861,34 +938,67 @@ fn decode_state(d: &mut Dec, version: u32, bodies: usize) -> DecResult<State> {
     let step_index = d.u64("step index")?;
     let timers = decode_timers(d)?;
 
-    let n = d.count(16 * 8, "body")?;
-    if n != bodies {
-        return Err(format!(
-            "{n} body states for {bodies} bodies in the scene section"
-        ));
-    }
-    let position = d.vec(n, |d| d.vec3("position"))?;
-    let orientation = d.vec(n, |d| d.quat("orientation"))?;
-    let velocity = d.vec(n, |d| d.vec3("velocity"))?;
-    let angular_velocity = d.vec(n, |d| d.vec3("angular velocity"))?;
-    let angular_momentum = d.vec(n, |d| d.vec3("angular momentum"))?;
-
-    let m = d.count(4 + 4 + 24 + 72 + 8 + 8 + 24 + 1 + 24, "contact")?;
+    let parts = if version >= 6 { d.u32("parts")? } else { 0 };
+    let (mut position, mut orientation) = (Vec::new(), Vec::new());
+    let (mut velocity, mut angular_velocity, mut angular_momentum) =
+        (Vec::new(), Vec::new(), Vec::new());
     let mut c = ContactSet::default();
-    decode_contacts(d, m, n, &mut c)?;
+    let mut anchors = None;
+    let mut spec = None;
+    if parts == 0 {
+        let n = d.count(16 * 8, "body")?;
+        if n != bodies {
+            return Err(format!(
+                "{n} body states for {bodies} bodies in the scene section"
+            ));
+        }
+        position = d.vec(n, |d| d.vec3("position"))?;
+        orientation = d.vec(n, |d| d.quat("orientation"))?;
+        velocity = d.vec(n, |d| d.vec3("velocity"))?;
+        angular_velocity = d.vec(n, |d| d.vec3("angular velocity"))?;
+        angular_momentum = d.vec(n, |d| d.vec3("angular momentum"))?;
 
-    let anchors = match version {
-        1 => None,
-        _ => match d.u8("anchors flag")? {
-            0 => None,
-            1 => {
-                let position = d.vec(n, |d| d.vec3("anchor position"))?;
-                let orientation = d.vec(n, |d| d.quat("anchor orientation"))?;
-                Some((position, orientation))
-            }
+        let m = d.count(4 + 4 + 24 + 72 + 8 + 8 + 24 + 1 + 24, "contact")?;
+        decode_contacts(d, m, n, &mut c)?;
+
+        anchors = match version {
+            1 => None,
+            _ => match d.u8("anchors flag")? {
+                0 => None,
+                1 => {
+                    let position = d.vec(n, |d| d.vec3("anchor position"))?;
+                    let orientation = d.vec(n, |d| d.quat("anchor orientation"))?;
+                    Some((position, orientation))
+                }
+                f => return Err(format!("anchors flag {f} is not 0 or 1")),
+            },
+        };
+    } else {
+        let n = d.u64("body count")?;
+        if n != bodies as u64 {
+            return Err(format!(
+                "{n} body states for {bodies} bodies in the scene section"
+            ));
+        }
+        let m = d.u64("contact count")?;
+        let anchors = match d.u8("anchors flag")? {
+            0 => false,
+            1 => true,
             f => return Err(format!("anchors flag {f} is not 0 or 1")),
-        },
-    };
+        };
+        let k = parts as usize;
+        if k.saturating_mul(8) > d.bytes.len() - d.pos {
+            return Err(format!("{k} parts need more than the bytes left"));
+        }
+        let sums = d.vec(k, |d| d.u64("part checksum"))?;
+        let m = usize::try_from(m).map_err(|_| format!("{m} contacts do not fit in memory"))?;
+        spec = Some(PartsSpec {
+            bodies,
+            contacts: m,
+            anchors,
+            sums,
+        });
+    }
     let origin = match version {
         1 | 2 => None,
         _ => match d.u8("origin flag")? {
@@ -936,6 +1046,7 @@ fn decode_state(d: &mut Dec, version: u32, bodies: usize) -> DecResult<State> {
         drive_work,
         drive_lag,
         stats,
+        parts: spec,
     })
 }
 
@@ -1027,10 +1138,14 @@ fn load(path: &Path) -> Result<Decoded, CheckpointError> {
         source,
     })?;
     let (payload, version) = unframe(&bytes, path)?;
-    decode_payload(payload, version).map_err(|why| CheckpointError::Corrupted {
+    let mut d = decode_payload(payload, version).map_err(|why| CheckpointError::Corrupted {
         path: path.to_path_buf(),
         reason: Corruption::Malformed(why),
-    })
+    })?;
+    if let Some(spec) = d.state.parts.take() {
+        parts::fill(path, d.fingerprint, &spec, &mut d.state)?;
+    }
+    Ok(d)
 }
 
 /// Checks the scene, then replaces the state of `world`; `world` is untouched on error.
@@ -1262,16 +1377,16 @@ pub fn newest_valid_checkpoint(
 }
 
 /// Deletes the temporary files of checkpoint writes cut short in `dir` (`checkpoint_*.tmp`,
-/// left by a run killed while writing one; never read, but each as large as a checkpoint),
-/// returning the paths removed.
+/// left by a run killed while writing one; never read, but each as large as a checkpoint) and
+/// the parts whose manifest was never written, returning the paths removed.
 pub fn remove_partial_checkpoints(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut removed = Vec::new();
     for entry in std::fs::read_dir(dir)? {
         let path = entry?.path();
-        let partial = path
-            .file_name()
-            .and_then(|n| n.to_str())
-            .is_some_and(|n| n.starts_with("checkpoint_") && n.ends_with(".tmp"));
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        let partial = name.starts_with("checkpoint_") && name.ends_with(".tmp")
+            // A part whose manifest was never written (a job stopped between the two).
+            || parts::step_of_part(name).is_some_and(|s| !checkpoint_path(dir, s).exists());
         if partial {
             std::fs::remove_file(&path)?;
             removed.push(path);
@@ -1281,14 +1396,26 @@ pub fn remove_partial_checkpoints(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
 }
 
 /// Deletes all but the `keep` newest checkpoint files in `dir` (at least one is always kept),
-/// returning the paths removed. Only `checkpoint_<step>.bin` files are considered.
+/// with their parts, returning the paths removed. Only `checkpoint_<step>.bin` files are
+/// counted.
 pub fn prune_checkpoints(dir: &Path, keep: usize) -> std::io::Result<Vec<PathBuf>> {
     let files = list_checkpoints(dir)?;
     let excess = files.len().saturating_sub(keep.max(1));
     let mut removed = Vec::with_capacity(excess);
+    let pruned: Vec<u64> = files.iter().take(excess).map(|(s, _)| *s).collect();
     for (_, path) in files.into_iter().take(excess) {
         std::fs::remove_file(&path)?;
         removed.push(path);
+    }
+    if !pruned.is_empty() {
+        for entry in std::fs::read_dir(dir)? {
+            let path = entry?.path();
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            if parts::step_of_part(name).is_some_and(|s| pruned.contains(&s)) {
+                std::fs::remove_file(&path)?;
+                removed.push(path);
+            }
+        }
     }
     Ok(removed)
 }

@@ -51,12 +51,12 @@
 //! almost nothing, so a frame is several times smaller than raw doubles. Connectivity and
 //! offsets are Int32 unless a file needs more.
 
+use super::shared::{gather, Owners};
 use super::{naming, write_atomic};
 use crate::bodies::BodyKind;
 use crate::laws::ContactStatus;
 use crate::math::{DMat3, DVec3};
 use crate::shapes::{ConvexPolyhedron, Shape};
-use crate::solver::partition::STATIC;
 use crate::world::World;
 use flate2::write::ZlibEncoder;
 use flate2::Compression;
@@ -418,66 +418,10 @@ fn remove_frame_file(dir: &Path, file: &str) -> io::Result<()> {
 /// Every rank's `ok`, gathered in rank order (a collective: every rank calls it at the same
 /// point of a frame).
 fn agree(world: &World, ok: bool) -> Vec<bool> {
-    let Some(ex) = world.exchange() else {
-        return vec![ok];
-    };
-    let size = ex.size();
-    let mut all = vec![0.0; size];
-    ex.all_gather(&[f64::from(u8::from(ok))], &vec![1; size], &mut all);
-    all.into_iter().map(|x| x == 1.0).collect()
-}
-
-/// The rank that owns each body in a frame: a dynamic body (or a force-limited driven one)
-/// belongs to the owner of its subdomain in the partition of the scene as it is
-/// ([`World::partition`]); without domain decomposition, to contiguous blocks of body
-/// indices. Other bodies: rank 0.
-struct Owners {
-    body: Vec<usize>,
-}
-
-impl Owners {
-    fn of(world: &World, ranks: usize) -> Self {
-        let n = world.bodies.len();
-        let body = match &world.settings.ddm {
-            Some(d) => {
-                let p = world.partition(d);
-                let count: usize = p.dims.iter().product();
-                p.subdomain
-                    .iter()
-                    .map(|&s| {
-                        if s == STATIC {
-                            0
-                        } else {
-                            crate::solver::exchange::owner(s as usize, count, ranks)
-                        }
-                    })
-                    .collect()
-            }
-            None => (0..n)
-                .map(|i| {
-                    if world.bodies.kind[i] == BodyKind::Dynamic {
-                        i * ranks / n.max(1)
-                    } else {
-                        0
-                    }
-                })
-                .collect(),
-        };
-        Owners { body }
-    }
-
-    /// Contact `c` belongs to the owner of its first dynamic body.
-    fn contact(&self, world: &World, c: usize) -> usize {
-        let (b1, b2) = (
-            world.contacts.body1[c] as usize,
-            world.contacts.body2[c] as usize,
-        );
-        if world.bodies.kind[b1] == BodyKind::Dynamic {
-            self.body[b1]
-        } else {
-            self.body[b2]
-        }
-    }
+    gather(world, &[f64::from(u8::from(ok))])
+        .into_iter()
+        .map(|x| x == 1.0)
+        .collect()
 }
 
 /// An array as a parallel file declares it.

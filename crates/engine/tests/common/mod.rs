@@ -1,9 +1,13 @@
 //! Fixtures shared by the engine's test files.
 #![allow(dead_code)]
 
-use ballast_engine::bodies::{BodyKind, BodySet};
+use ballast_engine::bodies::{BodyKind, BodySet, Driver, Term};
+use ballast_engine::laws::{FrictionTable, NormalLaw};
 use ballast_engine::math::DVec3;
 use ballast_engine::scenario::generate::GrainPack;
+use ballast_engine::shapes::ConvexPolyhedron;
+use ballast_engine::solver::{ConvergenceNorm, DdmSettings, SolverSettings};
+use ballast_engine::world::{StepSettings, World};
 
 /// A floor and four walls (group 0): a box `side` × `side` wide, open at the top, its corner at
 /// the origin.
@@ -26,4 +30,63 @@ pub fn pour(bodies: &mut BodySet, pack: &GrainPack, rho: f64, group: u32) {
     for g in pack.build().unwrap() {
         bodies.add_polyhedron(g, rho, BodyKind::Dynamic, group);
     }
+}
+
+/// A pile of 150 grains settling at μ = 1 with the default job's contact law (compliant,
+/// overlap law, hyperbolic closure, recovery), decomposed into `subdomains`; with `paddle`, a
+/// force-limited paddle stirs it (its drive row is solved after the interface).
+pub fn compliant_pile(subdomains: [usize; 3], parallel_interface: bool, paddle: bool) -> World {
+    let mut bodies = open_box(0.2);
+    if paddle {
+        let mut p = ConvexPolyhedron::cuboid(DVec3::new(0.005, 0.05, 0.03)).unwrap();
+        p.position = DVec3::new(0.03, 0.1, 0.05);
+        let i = bodies.add_polyhedron(p, 7850.0, BodyKind::Kinematic, 2);
+        bodies.driver[i] = Some(Driver {
+            vx: vec![Term::Constant { value: 0.5 }],
+            vz: vec![Term::Sine {
+                amplitude: 0.2,
+                frequency: 20.0,
+                phase: 0.0,
+                start: 0.0,
+                end: f64::INFINITY,
+            }],
+            max_force: [2.0, f64::INFINITY, 8.0],
+            ..Default::default()
+        });
+    }
+    let pack = GrainPack {
+        count: 150,
+        min: [0.0, 0.0, 0.002],
+        max_xy: [0.2, 0.2],
+        diameter: [0.025, 0.045],
+        vertices: [10, 16],
+        elongation: 1.3,
+        flatness: 1.1,
+        seed: 5,
+    };
+    pour(&mut bodies, &pack, 2700.0, 1);
+    let settings = StepSettings {
+        dt: 4e-4,
+        theta: 0.55,
+        contact_stiffness: Some(1e7),
+        tangential_stiffness: Some(5e6),
+        overlap_recovery: 0.2,
+        max_closure: Some(1e-4),
+        normal_law: NormalLaw::Overlap,
+        solver: SolverSettings {
+            tolerance: 1e-3,
+            max_iterations: 300,
+            norm: ConvergenceNorm::NaturalMap,
+            ..Default::default()
+        },
+        ddm: Some(DdmSettings {
+            subdomains,
+            parallel_interface,
+            // Every phase dispatched to the workers, as on many cores.
+            min_parallel_contacts: 0,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    World::new(bodies, FrictionTable::new(1.0), settings)
 }
