@@ -933,4 +933,35 @@ mod tests {
         paper.solver = file.solver.clone();
         assert_eq!(file, paper);
     }
+
+    /// The long-track example: the paper's bed made 15 blocks long (same spacing, width,
+    /// depth, tiled preparation), the default job's contact law and step, one slab per block.
+    #[test]
+    fn long_track_example_is_the_paper_bed_made_longer() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../examples/long_track.toml"
+        );
+        let file = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let (paper, default) = (
+            TrackScenario::paper_preset(),
+            TrackScenario::default_preset(),
+        );
+        assert_eq!(file.track.blocks, 15);
+        assert!((file.track.length() - 15.0 * paper.track.spacing).abs() < 1e-12);
+        assert_eq!(
+            (file.track.spacing, file.track.depth, file.track.width),
+            (paper.track.spacing, paper.track.depth, paper.track.width)
+        );
+        assert_eq!(file.preparation, paper.preparation);
+        assert_eq!(file.tamping.blocks, vec![8]);
+        assert_eq!(file.simulation.dt, default.simulation.dt);
+        assert_eq!(
+            file.simulation.contact_stiffness,
+            default.simulation.contact_stiffness
+        );
+        assert_eq!(file.solver, default.solver);
+        assert_eq!(file.ddm.unwrap().subdomains, [15, 1, 1]);
+        file.track.validate().unwrap();
+    }
 }
