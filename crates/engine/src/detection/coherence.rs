@@ -7,7 +7,7 @@
 //! margin `h (|v| + |ω| ρ)` exceeds `δ`. The narrow phase of a pair is computed at the two
 //! anchor poses, so as long as neither body is re-anchored the pair's manifold is the same and
 //! is reused from the previous step instead of being computed again. Its points are then carried
-//! to the current poses rigidly (see [`Anchors::transport`]).
+//! to the current poses rigidly (see `Anchors::transport`).
 //!
 //! Why this is exact enough: with `δ` a small fraction of the alert distance, a point of either
 //! body is within `δ` of where the manifold saw it. Gaps are recomputed from the current poses:

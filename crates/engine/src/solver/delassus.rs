@@ -27,7 +27,7 @@ pub struct SolverBody {
     pub drift: f32,
     /// Counts every write of this body's velocities within a solve (exact, unlike `epoch`):
     /// a residual term computed at the same versions of its two bodies is still exact (see
-    /// [`super::nlgs::TermCache`]).
+    /// the solver's `TermCache`).
     pub version: u32,
 }
 
