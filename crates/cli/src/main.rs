@@ -55,7 +55,8 @@ enum Command {
         /// Stop after this many steps (overrides the scenario).
         #[arg(long, value_parser = parse_steps)]
         steps: Option<u64>,
-        /// Worker threads (default: all cores).
+        /// Worker threads (default: all cores; under mpirun, the cores shared by the ranks on
+        /// the same machine).
         #[arg(long)]
         threads: Option<usize>,
         /// Domain decomposition into NXxNYxNZ subdomains (e.g. 1x7x1); overrides the
@@ -284,78 +285,82 @@ fn main() -> ExitCode {
             threads,
             subdomains,
             quiet,
-        } => set_threads(threads)
-            .map_err(Failure::Error)
-            .and_then(|threads| {
-                // Launched by `mpirun -np K` (K > 1): this process is one rank of the run.
-                #[cfg(feature = "mpi")]
-                let universe =
-                    mpi::initialize_with_threading(mpi::Threading::Funneled).map(|(u, _)| u);
-                #[cfg(feature = "mpi")]
-                let ranks = universe
-                    .as_ref()
-                    .map(|u| std::sync::Arc::new(ranks::MpiRanks::new(u)))
-                    .filter(|r| ballast_engine::solver::Exchange::size(&**r) > 1);
-                #[cfg(feature = "mpi")]
-                let rank = ranks
-                    .as_ref()
-                    .map_or(0, |r| ballast_engine::solver::Exchange::rank(&**r));
-                #[cfg(not(feature = "mpi"))]
-                let rank = 0;
-                let mut terminal = Terminal {
-                    quiet: quiet || rank != 0,
-                    progress: None,
-                };
-                #[cfg(feature = "mpi")]
-                let run_ranks = ranks.clone().map(ranks::RunRanks);
-                #[cfg(feature = "mpi")]
-                let mut agreed;
-                #[cfg(feature = "mpi")]
-                let observer: &mut dyn Observer = match &ranks {
-                    Some(r) => {
-                        agreed = ranks::Agreed {
-                            inner: &mut terminal,
-                            ranks: r,
-                        };
-                        &mut agreed
-                    }
-                    None => &mut terminal,
-                };
-                #[cfg(not(feature = "mpi"))]
-                let observer: &mut dyn Observer = &mut terminal;
-                let result = ballast_run::run(
-                    &ballast_run::RunArgs {
-                        file: file.as_deref(),
-                        preset: preset.as_deref(),
-                        cache: if no_cache {
-                            None
-                        } else {
-                            cache.or_else(default_cache)
-                        },
-                        out: resume.as_deref().unwrap_or(&out),
-                        resume: resume.is_some(),
-                        overwrite,
-                        steps,
-                        threads,
-                        subdomains,
+        } => {
+            // Launched by `mpirun -np K` (K > 1): this process is one rank of the run, and
+            // by default the ranks on one machine share its cores.
+            #[cfg(feature = "mpi")]
+            let universe = mpi::initialize_with_threading(mpi::Threading::Funneled).map(|(u, _)| u);
+            #[cfg(feature = "mpi")]
+            let threads = threads.or_else(|| universe.as_ref().and_then(ranks::threads_per_rank));
+            set_threads(threads)
+                .map_err(Failure::Error)
+                .and_then(|threads| {
+                    #[cfg(feature = "mpi")]
+                    let ranks = universe
+                        .as_ref()
+                        .map(|u| std::sync::Arc::new(ranks::MpiRanks::new(u)))
+                        .filter(|r| ballast_engine::solver::Exchange::size(&**r) > 1);
+                    #[cfg(feature = "mpi")]
+                    let rank = ranks
+                        .as_ref()
+                        .map_or(0, |r| ballast_engine::solver::Exchange::rank(&**r));
+                    #[cfg(not(feature = "mpi"))]
+                    let rank = 0;
+                    let mut terminal = Terminal {
                         quiet: quiet || rank != 0,
-                        #[cfg(feature = "mpi")]
-                        ranks: run_ranks.as_ref().map(|r| r as &dyn ballast_run::Ranks),
-                        #[cfg(not(feature = "mpi"))]
-                        ranks: None,
-                    },
-                    observer,
-                )
-                .map(|_| ());
-                // A rank that fails alone (a write error on rank 0) ends the whole job: the
-                // others would wait for it forever. A divergence or a stop is every rank's.
-                #[cfg(feature = "mpi")]
-                if let (Err(Failure::Error(e) | Failure::Io(e)), Some(r)) = (&result, &ranks) {
-                    eprintln!("error: rank {rank}: {}", cut_lines(e));
-                    r.abort(1);
-                }
-                result
-            }),
+                        progress: None,
+                    };
+                    #[cfg(feature = "mpi")]
+                    let run_ranks = ranks.clone().map(ranks::RunRanks);
+                    #[cfg(feature = "mpi")]
+                    let mut agreed;
+                    #[cfg(feature = "mpi")]
+                    let observer: &mut dyn Observer = match &ranks {
+                        Some(r) => {
+                            agreed = ranks::Agreed {
+                                inner: &mut terminal,
+                                ranks: r,
+                            };
+                            &mut agreed
+                        }
+                        None => &mut terminal,
+                    };
+                    #[cfg(not(feature = "mpi"))]
+                    let observer: &mut dyn Observer = &mut terminal;
+                    let result = ballast_run::run(
+                        &ballast_run::RunArgs {
+                            file: file.as_deref(),
+                            preset: preset.as_deref(),
+                            cache: if no_cache {
+                                None
+                            } else {
+                                cache.or_else(default_cache)
+                            },
+                            out: resume.as_deref().unwrap_or(&out),
+                            resume: resume.is_some(),
+                            overwrite,
+                            steps,
+                            threads,
+                            subdomains,
+                            quiet: quiet || rank != 0,
+                            #[cfg(feature = "mpi")]
+                            ranks: run_ranks.as_ref().map(|r| r as &dyn ballast_run::Ranks),
+                            #[cfg(not(feature = "mpi"))]
+                            ranks: None,
+                        },
+                        observer,
+                    )
+                    .map(|_| ());
+                    // A rank that fails alone (a write error on rank 0) ends the whole job: the
+                    // others would wait for it forever. A divergence or a stop is every rank's.
+                    #[cfg(feature = "mpi")]
+                    if let (Err(Failure::Error(e) | Failure::Io(e)), Some(r)) = (&result, &ranks) {
+                        eprintln!("error: rank {rank}: {}", cut_lines(e));
+                        r.abort(1);
+                    }
+                    result
+                })
+        }
         Command::Bench {
             json,
             steps,

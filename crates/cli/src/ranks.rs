@@ -77,6 +77,20 @@ impl Exchange for MpiRanks {
     }
 }
 
+/// The worker threads a rank takes by default: this machine's cores divided among the ranks
+/// running on it (at least 1), so `mpirun -np K` on one machine does not start K pools of all
+/// its cores that wait on each other; `None` for one process (all cores). Results do not
+/// depend on it.
+pub fn threads_per_rank(universe: &mpi::environment::Universe) -> Option<usize> {
+    let world = universe.world();
+    if world.size() <= 1 {
+        return None;
+    }
+    let local = world.split_shared(world.rank()).size().max(1) as usize;
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    Some((cores / local).max(1))
+}
+
 /// [`Ranks`] over an [`MpiRanks`] shared with the world.
 pub struct RunRanks(pub Arc<MpiRanks>);
 

@@ -3,7 +3,7 @@
 //! same partition on 2 and 3 ranks; a 2-rank run stopped at a step and resumed on 2 ranks
 //! equals the uninterrupted one (ParaView frames too: one piece per rank, the same frames), and
 //! so does its checkpoint (written in parts) resumed by one process; a rank that fails ends
-//! the job with an error, no hang.
+//! the job with an error, no hang; ranks on one machine share its cores by default.
 #![cfg(feature = "mpi")]
 
 use std::path::{Path, PathBuf};
@@ -299,5 +299,39 @@ fn a_failing_rank_ends_the_job() {
         err.contains("rank 0") && err.contains("holds another run"),
         "{err}"
     );
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// Without `--threads`, the ranks on one machine share its cores (each takes its share, at
+/// least 1) instead of each starting a pool of all of them; the results are the same.
+#[test]
+fn ranks_share_the_machine_by_default() {
+    let root = tmp("threads");
+    let pile = example("examples/pile.toml");
+    let out = root.join("out");
+    let mut c = Command::new("mpirun");
+    c.args(["--allow-run-as-root", "--oversubscribe", "-np", "2"])
+        .arg(bin())
+        .args(["run", pile.to_str().unwrap(), "--subdomains", "2x2x1"])
+        .args(["--steps", "300", "--quiet", "--out", out.to_str().unwrap()]);
+    ok(run_for(c, Duration::from_secs(300)));
+    let cores = std::thread::available_parallelism().map_or(1, |c| c.get());
+    assert_eq!(summary(&out)["threads"], (cores / 2).max(1));
+    let alone = root.join("alone");
+    ok(ballast(
+        None,
+        &[
+            "run",
+            pile.to_str().unwrap(),
+            "--subdomains",
+            "2x2x1",
+            "--steps",
+            "300",
+            "--quiet",
+            "--out",
+            alone.to_str().unwrap(),
+        ],
+    ));
+    assert_eq!(digest(&alone), digest(&out));
     let _ = std::fs::remove_dir_all(&root);
 }
