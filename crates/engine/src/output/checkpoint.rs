@@ -708,31 +708,44 @@ fn encode_state_with(p: &mut Enc, world: &World, stats: Option<&RunStats>, parts
 
 /// Body states, contacts and anchors, whole.
 fn encode_arrays(p: &mut Enc, world: &World) {
+    p.len(world.bodies.len());
+    encode_bodies(p, world, 0..world.bodies.len());
+    p.len(world.contacts.len());
+    encode_contacts(p, &world.contacts, 0..world.contacts.len());
+    encode_anchors(p, world, 0..world.bodies.len());
+}
+
+/// The states of bodies `rows`, field by field.
+fn encode_bodies(p: &mut Enc, world: &World, rows: impl Iterator<Item = usize> + Clone) {
     let b = &world.bodies;
-    p.len(b.len());
-    b.position.iter().for_each(|&v| p.vec3(v));
-    b.orientation.iter().for_each(|&q| p.quat(q));
+    rows.clone().for_each(|i| p.vec3(b.position[i]));
+    rows.clone().for_each(|i| p.quat(b.orientation[i]));
     for a in [&b.velocity, &b.angular_velocity, &b.angular_momentum] {
-        a.iter().for_each(|&v| p.vec3(v));
+        rows.clone().for_each(|i| p.vec3(a[i]));
     }
+}
 
-    let c = &world.contacts;
-    p.len(c.len());
-    c.body1.iter().for_each(|&b| p.u32(b));
-    c.body2.iter().for_each(|&b| p.u32(b));
-    c.point.iter().for_each(|&v| p.vec3(v));
-    c.frame.iter().flatten().for_each(|&v| p.vec3(v));
-    c.gap.iter().for_each(|&x| p.f64(x));
-    c.mu.iter().for_each(|&x| p.f64(x));
-    c.impulse.iter().for_each(|&v| p.vec3(v));
-    c.status.iter().for_each(|&s| p.u8(status_code(s)));
-    c.local_point.iter().for_each(|&v| p.vec3(v));
+/// Contacts `rows` of `c`, field by field (read back by [`decode_contacts`]).
+fn encode_contacts(p: &mut Enc, c: &ContactSet, rows: impl Iterator<Item = usize> + Clone) {
+    rows.clone().for_each(|k| p.u32(c.body1[k]));
+    rows.clone().for_each(|k| p.u32(c.body2[k]));
+    rows.clone().for_each(|k| p.vec3(c.point[k]));
+    rows.clone()
+        .for_each(|k| c.frame[k].iter().for_each(|&v| p.vec3(v)));
+    rows.clone().for_each(|k| p.f64(c.gap[k]));
+    rows.clone().for_each(|k| p.f64(c.mu[k]));
+    rows.clone().for_each(|k| p.vec3(c.impulse[k]));
+    rows.clone().for_each(|k| p.u8(status_code(c.status[k])));
+    rows.for_each(|k| p.vec3(c.local_point[k]));
+}
 
-    let a = world.detector.anchors();
-    if a.position.len() == b.len() && a.orientation.len() == b.len() {
+/// The anchors flag, then (flag 1) the anchor poses of bodies `rows`.
+fn encode_anchors(p: &mut Enc, world: &World, rows: impl Iterator<Item = usize> + Clone) {
+    if parts::has_anchors(world) {
+        let a = world.detector.anchors();
         p.u8(1);
-        a.position.iter().for_each(|&v| p.vec3(v));
-        a.orientation.iter().for_each(|&q| p.quat(q));
+        rows.clone().for_each(|i| p.vec3(a.position[i]));
+        rows.for_each(|i| p.quat(a.orientation[i]));
     } else {
         p.u8(0);
     }

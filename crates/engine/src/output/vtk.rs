@@ -160,13 +160,11 @@ impl VtkWriter {
             }
             writer.series[k] = frames;
         }
-        if rank != 0 {
-            writer.next = next_number(&writer.series);
-            return Ok(writer);
-        }
         writer.next = next_number(&writer.series);
-        for (k, name) in SERIES.iter().enumerate() {
-            writer.write_pvd(k, name)?;
+        if rank == 0 {
+            for (k, name) in SERIES.iter().enumerate() {
+                writer.write_pvd(k, name)?;
+            }
         }
         Ok(writer)
     }

@@ -4,8 +4,8 @@
 //! together, whatever the number of ranks that reads it.
 
 use super::{
-    decode_contacts, frame, status_code, unframe_with, CheckpointError, Corruption, Dec, DecResult,
-    Enc, State, HEADER_LEN,
+    decode_contacts, encode_anchors, encode_bodies, encode_contacts, frame, unframe_with,
+    CheckpointError, Corruption, Dec, DecResult, Enc, State, HEADER_LEN,
 };
 use crate::contacts::ContactSet;
 use crate::math::{DQuat, DVec3};
@@ -129,35 +129,11 @@ fn encode_part(world: &World, owners: &Owners, rank: usize) -> Vec<u8> {
 
     p.len(bodies.len());
     bodies.iter().for_each(|&i| p.u32(i as u32));
-    bodies.iter().for_each(|&i| p.vec3(b.position[i]));
-    bodies.iter().for_each(|&i| p.quat(b.orientation[i]));
-    for a in [&b.velocity, &b.angular_velocity, &b.angular_momentum] {
-        bodies.iter().for_each(|&i| p.vec3(a[i]));
-    }
-    if has_anchors(world) {
-        let a = world.detector.anchors();
-        p.u8(1);
-        bodies.iter().for_each(|&i| p.vec3(a.position[i]));
-        bodies.iter().for_each(|&i| p.quat(a.orientation[i]));
-    } else {
-        p.u8(0);
-    }
-
+    encode_bodies(&mut p, world, bodies.iter().copied());
+    encode_anchors(&mut p, world, bodies.iter().copied());
     p.len(contacts.len());
     contacts.iter().for_each(|&k| p.u32(k as u32));
-    contacts.iter().for_each(|&k| p.u32(c.body1[k]));
-    contacts.iter().for_each(|&k| p.u32(c.body2[k]));
-    contacts.iter().for_each(|&k| p.vec3(c.point[k]));
-    contacts
-        .iter()
-        .for_each(|&k| c.frame[k].iter().for_each(|&v| p.vec3(v)));
-    contacts.iter().for_each(|&k| p.f64(c.gap[k]));
-    contacts.iter().for_each(|&k| p.f64(c.mu[k]));
-    contacts.iter().for_each(|&k| p.vec3(c.impulse[k]));
-    contacts
-        .iter()
-        .for_each(|&k| p.u8(status_code(c.status[k])));
-    contacts.iter().for_each(|&k| p.vec3(c.local_point[k]));
+    encode_contacts(&mut p, c, contacts.iter().copied());
     frame(PART_MAGIC, p)
 }
 
