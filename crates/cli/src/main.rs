@@ -211,6 +211,14 @@ fn set_threads(threads: Option<usize>) -> Result<usize, String> {
     Ok(rayon::current_num_threads())
 }
 
+/// Runs `job` on a worker thread of the global pool. The steps' parallel loops then start
+/// inside the pool, where a worker hands the work to the others directly; from a thread
+/// outside it, each loop (a few hundred a step) is queued and that thread sleeps until the
+/// loop ends, two context switches a loop. Scheduling only: results are unchanged.
+fn on_pool<R: Send>(job: impl FnOnce() -> R + Send) -> R {
+    rayon::scope(|_| job())
+}
+
 /// Longest line of an error message (characters): a TOML error quotes the offending line,
 /// which may hold a value of megabytes.
 const MESSAGE_LINE_CHARS: usize = 1000;
@@ -310,47 +318,47 @@ fn main() -> ExitCode {
                         quiet: quiet || rank != 0,
                         progress: None,
                     };
+                    let cache = if no_cache {
+                        None
+                    } else {
+                        cache.or_else(default_cache)
+                    };
+                    let job =
+                        |observer: &mut dyn Observer, ranks: Option<&dyn ballast_run::Ranks>| {
+                            ballast_run::run(
+                                &ballast_run::RunArgs {
+                                    file: file.as_deref(),
+                                    preset: preset.as_deref(),
+                                    cache: cache.clone(),
+                                    out: resume.as_deref().unwrap_or(&out),
+                                    resume: resume.is_some(),
+                                    overwrite,
+                                    steps,
+                                    threads,
+                                    subdomains,
+                                    quiet: quiet || rank != 0,
+                                    ranks,
+                                },
+                                observer,
+                            )
+                            .map(|_| ())
+                        };
+                    // A distributed run stays on the thread that initialised MPI (funneled:
+                    // only it may call MPI).
                     #[cfg(feature = "mpi")]
-                    let run_ranks = ranks.clone().map(ranks::RunRanks);
-                    #[cfg(feature = "mpi")]
-                    let mut agreed;
-                    #[cfg(feature = "mpi")]
-                    let observer: &mut dyn Observer = match &ranks {
+                    let result = match &ranks {
                         Some(r) => {
-                            agreed = ranks::Agreed {
+                            let run_ranks = ranks::RunRanks(r.clone());
+                            let mut agreed = ranks::Agreed {
                                 inner: &mut terminal,
                                 ranks: r,
                             };
-                            &mut agreed
+                            job(&mut agreed, Some(&run_ranks))
                         }
-                        None => &mut terminal,
+                        None => on_pool(|| job(&mut terminal, None)),
                     };
                     #[cfg(not(feature = "mpi"))]
-                    let observer: &mut dyn Observer = &mut terminal;
-                    let result = ballast_run::run(
-                        &ballast_run::RunArgs {
-                            file: file.as_deref(),
-                            preset: preset.as_deref(),
-                            cache: if no_cache {
-                                None
-                            } else {
-                                cache.or_else(default_cache)
-                            },
-                            out: resume.as_deref().unwrap_or(&out),
-                            resume: resume.is_some(),
-                            overwrite,
-                            steps,
-                            threads,
-                            subdomains,
-                            quiet: quiet || rank != 0,
-                            #[cfg(feature = "mpi")]
-                            ranks: run_ranks.as_ref().map(|r| r as &dyn ballast_run::Ranks),
-                            #[cfg(not(feature = "mpi"))]
-                            ranks: None,
-                        },
-                        observer,
-                    )
-                    .map(|_| ());
+                    let result = on_pool(|| job(&mut terminal, None));
                     // A rank that fails alone (a write error on rank 0) ends the whole job: the
                     // others would wait for it forever. A divergence or a stop is every rank's.
                     #[cfg(feature = "mpi")]
