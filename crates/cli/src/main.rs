@@ -314,8 +314,10 @@ fn main() -> ExitCode {
                         .map_or(0, |r| ballast_engine::solver::Exchange::rank(&**r));
                     #[cfg(not(feature = "mpi"))]
                     let rank = 0;
+                    // Only rank 0 speaks.
+                    let quiet = quiet || rank != 0;
                     let mut terminal = Terminal {
-                        quiet: quiet || rank != 0,
+                        quiet,
                         progress: None,
                     };
                     let cache = if no_cache {
@@ -336,7 +338,7 @@ fn main() -> ExitCode {
                                     steps,
                                     threads,
                                     subdomains,
-                                    quiet: quiet || rank != 0,
+                                    quiet,
                                     ranks,
                                 },
                                 observer,
