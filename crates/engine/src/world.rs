@@ -18,6 +18,7 @@ use crate::laws::{default_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::build_local_problems;
+use crate::solver::partition::SortedAxes;
 use crate::solver::Exchange;
 use crate::solver::{
     ddm, CorrectionSettings, DdmSettings, DriveRows, LocalProblem, Nlgs, Partition, SolveReport,
@@ -324,6 +325,8 @@ struct Scratch {
     attach: Vec<u32>,
     /// A preparation made by [`World::detect`] that the next [`World::step`] solves.
     pending: Option<(f64, PhaseTimes)>,
+    /// The bodies' orders along the axes of the last partition (a starting point only).
+    sorted_axes: SortedAxes,
 }
 
 impl World {
@@ -433,6 +436,12 @@ impl World {
     /// The partition of this step: boxes over the dynamic bodies' centres, weighted by
     /// `1 + number of contacts` when balancing by contacts.
     pub fn partition(&self, d: &DdmSettings) -> Partition {
+        self.partition_from(d, &mut SortedAxes::default())
+    }
+
+    /// [`World::partition`] from the bodies' orders along the axes of the last call (see
+    /// [`Partition::build_from`]).
+    fn partition_from(&self, d: &DdmSettings, sorted: &mut SortedAxes) -> Partition {
         let n = self.bodies.len();
         let mut weights = vec![1.0; n];
         for k in 0..self.contacts.len() {
@@ -444,12 +453,13 @@ impl World {
         let dynamic: Vec<bool> = (0..n)
             .map(|i| self.bodies.kind[i] == BodyKind::Dynamic || self.force_limited(i).is_some())
             .collect();
-        Partition::build(
+        Partition::build_from(
             &self.bodies.position,
             &dynamic,
             d.subdomains,
             d.balance,
             &weights,
+            sorted,
         )
     }
 
@@ -766,7 +776,9 @@ impl World {
                 (report, corrected)
             }
             Some(d) => {
-                let partition = self.partition(d);
+                let mut sorted = std::mem::take(&mut self.scratch.sorted_axes);
+                let partition = self.partition_from(d, &mut sorted);
+                self.scratch.sorted_axes = sorted;
                 self.scratch.ddm_workspace.exchange = self.exchange.clone();
                 let (report, t, corrected) = ddm::solve_and_correct(
                     &mut self.scratch.ddm_workspace,
@@ -790,9 +802,12 @@ impl World {
                 (report, corrected)
             }
         };
-        for (r, c) in self.contacts.impulse.iter_mut().zip(&self.scratch.locals) {
-            *r = c.r;
-        }
+        self.contacts
+            .impulse
+            .par_iter_mut()
+            .with_min_len(4096)
+            .zip(self.scratch.locals.par_iter())
+            .for_each(|(r, c)| *r = c.r);
         // A driven body moves as its drive says: the position-only overlap correction pushes
         // the grains off it, not it off the grains.
         if corrected {

@@ -150,9 +150,26 @@ pub struct Bucket {
     pub overlaps: Vec<Overlap>,
     /// The residual terms of the current solve (empty until its first check).
     terms: Vec<TermCache>,
+    /// The contacts whose residual term was large at the last check (see [`hot_exceeds`]).
+    hot: Vec<u32>,
 }
 
 impl Bucket {
+    /// Appends the contacts `members` of `locals`, each as `renumber` gives it (one copy of
+    /// each local problem, written in place).
+    fn fill(
+        &mut self,
+        members: &[u32],
+        locals: &[LocalProblem],
+        renumber: impl Fn(&LocalProblem) -> LocalProblem,
+    ) {
+        self.locals
+            .extend(members.iter().map(|&idx| renumber(&locals[idx as usize])));
+        self.origin.extend_from_slice(members);
+        self.status
+            .resize(self.origin.len(), ContactStatus::NoContact);
+    }
+
     fn push(&mut self, l: LocalProblem, origin: u32) {
         self.locals.push(l);
         self.origin.push(origin);
@@ -164,6 +181,7 @@ impl Bucket {
         self.origin.clear();
         self.status.clear();
         self.terms.clear();
+        self.hot.clear();
     }
 
     /// Number of contacts.
@@ -197,6 +215,8 @@ pub struct DdmProblem {
     pub colours: usize,
     /// Scratch of [`DdmProblem::rebuild`]: each subdomain's contacts (caller's indices).
     members: Vec<Vec<u32>>,
+    /// Per caller contact: its bucket (in the equivalent order) and its place there.
+    slot: Vec<(u32, u32)>,
 }
 
 impl DdmProblem {
@@ -222,31 +242,44 @@ impl DdmProblem {
             l.body2 = partition.new_index[c.body2 as usize];
             l
         };
-        self.members.resize_with(k, Vec::new);
-        self.members.iter_mut().for_each(Vec::clear);
-        let mut gamma: Vec<((u32, u32), u32)> = Vec::new();
-        for (idx, c) in locals.iter().enumerate() {
-            let (s1, s2) = (
+        // Each contact's subdomain (`STATIC`: Γ), read in parallel: the local problems are
+        // megabytes, their bodies' indices one line apart.
+        let subdomain = |c: &LocalProblem| {
+            (
                 partition.subdomain[c.body1 as usize],
                 partition.subdomain[c.body2 as usize],
-            );
-            let owner = match (s1, s2) {
-                (a, b) if a == b => Some(a),
-                (STATIC, b) => Some(b),
-                (a, STATIC) => Some(a),
-                _ => None,
-            };
-            match owner {
-                Some(e) if e != STATIC => self.members[e as usize].push(idx as u32),
-                // Two static bodies never make a contact (detection skips them); keep it in Γ.
-                _ => {
-                    let pair = if parallel_interface {
-                        (s1.min(s2), s1.max(s2))
-                    } else {
-                        (STATIC, STATIC)
-                    };
-                    gamma.push((pair, idx as u32));
-                }
+            )
+        };
+        let owners: Vec<u32> = locals
+            .par_iter()
+            .with_min_len(4096)
+            .map(|c| match subdomain(c) {
+                (a, b) if a == b => a,
+                (STATIC, b) => b,
+                (a, STATIC) => a,
+                // Two static bodies never make a contact (detection skips them): `STATIC`
+                // keeps it in Γ.
+                _ => STATIC,
+            })
+            .collect();
+        self.members.resize_with(k, Vec::new);
+        self.members.iter_mut().for_each(Vec::clear);
+        self.slot.clear();
+        self.slot.resize(locals.len(), (0, 0));
+        let mut gamma: Vec<((u32, u32), u32)> = Vec::new();
+        for (idx, &owner) in owners.iter().enumerate() {
+            if owner != STATIC {
+                let members = &mut self.members[owner as usize];
+                self.slot[idx] = (owner, members.len() as u32);
+                members.push(idx as u32);
+            } else {
+                let pair = if parallel_interface {
+                    let (s1, s2) = subdomain(&locals[idx]);
+                    (s1.min(s2), s1.max(s2))
+                } else {
+                    (STATIC, STATIC)
+                };
+                gamma.push((pair, idx as u32));
             }
         }
         self.sub.resize_with(k, Bucket::default);
@@ -255,9 +288,7 @@ impl DdmProblem {
             .zip(self.members.par_iter())
             .for_each(|(bucket, members)| {
                 bucket.clear();
-                for &idx in members {
-                    bucket.push(renumber(&locals[idx as usize]), idx);
-                }
+                bucket.fill(members, locals, renumber);
             });
         // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily.
         gamma.sort_unstable();
@@ -302,6 +333,11 @@ impl DdmProblem {
         }
         self.groups.sort_by_key(|g| (g.colour, g.pair));
         self.colours = colours;
+        for (gi, g) in self.groups.iter().enumerate() {
+            for (place, &idx) in g.bucket.origin.iter().enumerate() {
+                self.slot[idx as usize] = ((k + gi) as u32, place as u32);
+            }
+        }
     }
 
     /// The buckets in the equivalent order: subdomains, then Γ by colour and group.
@@ -878,8 +914,6 @@ pub struct DdmWorkspace {
     pv: Vec<SolverBody>,
     /// Per-contact terms of a sum, in the equivalent order.
     terms: Vec<f64>,
-    /// Per caller contact: its bucket (in the equivalent order) and its place there.
-    slot: Vec<(u32, u32)>,
     /// The drives, bodies in solver numbering.
     drives: Vec<DriveRows>,
     /// The ranks of a run distributed over processes (`None`: this process solves alone).
@@ -910,7 +944,6 @@ pub fn solve_and_correct(
         pb,
         pv,
         terms,
-        slot,
         drives: dr,
         exchange: ex,
     } = ws;
@@ -944,14 +977,6 @@ pub fn solve_and_correct(
     }));
     let q2: f64 = terms.iter().fold(0.0, |s, &t| s + t) + drive::scale_sum(dr, pb.as_slice());
     let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
-    // Where each caller contact lives, for the parallel write-back.
-    slot.clear();
-    slot.resize(locals.len(), (0, 0));
-    for (bi, b) in buckets.iter().enumerate() {
-        for (k, &idx) in b.origin.iter().enumerate() {
-            slot[idx as usize] = (bi as u32, k as u32);
-        }
-    }
     drop(buckets);
     // Distributed over ranks: each sweeps its own buckets (the warm start, cheap, every rank
     // does whole, so the bodies start the same everywhere).
@@ -1036,8 +1061,20 @@ pub fn solve_and_correct(
         sums += drive_sums;
         report.iterations = j;
         report.quad = sums.quad();
+        let (checks, proofs) = (&mut report.residual_checks, &mut report.hot_proofs);
         if stop.converged(s, j, report.quad, |bound| {
-            residual_within(nlgs, p, dr, pb, q, bound, ranks.as_mut(), &bucket_mine)
+            *checks += 1;
+            residual_within(
+                nlgs,
+                p,
+                dr,
+                pb,
+                q,
+                bound,
+                ranks.as_mut(),
+                &bucket_mine,
+                proofs,
+            )
         }) {
             report.converged = true;
             break;
@@ -1053,6 +1090,7 @@ pub fn solve_and_correct(
             f64::INFINITY,
             ranks.as_mut(),
             &bucket_mine,
+            &mut 0,
         )
         .unwrap_or(f64::INFINITY)
     });
@@ -1078,7 +1116,7 @@ pub fn solve_and_correct(
         .par_iter_mut()
         .with_min_len(1024)
         .zip(status.par_iter_mut())
-        .zip(slot.par_iter())
+        .zip(p.slot.par_iter())
         .for_each(|((c, st), &(bi, k))| {
             let b = buckets[bi as usize];
             c.r = b.locals[k as usize].r;
@@ -1182,9 +1220,32 @@ fn correct(
     found
 }
 
+/// Whether the terms of the buckets' hot contacts (see [`Bucket::hot`], listed by the last
+/// full check) alone exceed `limit`, summed bucket by bucket in the buckets' order and in
+/// their order within each bucket. Then the full sum exceeds it too, bit for bit: rounded
+/// addition is monotone in each operand and adding a non-negative term never lowers a sum,
+/// so leaving out terms of an ordered sum of non-negative terms can only lower it. A check
+/// proven failed here is the one the full pass would have failed: same decision, same state.
+fn hot_exceeds(nlgs: &Nlgs, p: &mut DdmProblem, pb: &[SolverBody], limit: f64) -> bool {
+    if !limit.is_finite() || p.buckets().all(|b| b.hot.is_empty()) {
+        return false;
+    }
+    let reuse = nlgs.settings.reuse_residual_terms;
+    let buckets: Vec<&mut Bucket> = p.buckets_mut().collect();
+    let sums: Vec<f64> = buckets
+        .into_par_iter()
+        .map(|b| {
+            let cache = TermCache::ready(&mut b.terms, b.locals.len(), reuse);
+            nlgs.residual_sum_of(&b.locals, pb, &b.hot, cache)
+        })
+        .collect();
+    sums.into_iter().fold(0.0, |s, t| s + t) > limit
+}
+
 /// Relative natural-map residual over all contacts and drives: each bucket's sum in parallel,
 /// the sums added in the equivalent order, the drives' last; `None` as soon as one bucket's
-/// partial sum shows that it exceeds `bound` (the sums are non-negative).
+/// partial sum shows that it exceeds `bound` (the sums are non-negative), or when the hot
+/// contacts alone do (see [`hot_exceeds`], counted in `hot_proofs`).
 #[allow(clippy::too_many_arguments)]
 fn residual_within(
     nlgs: &Nlgs,
@@ -1195,9 +1256,18 @@ fn residual_within(
     bound: f64,
     ranks: Option<&mut Ranks>,
     mine: &[bool],
+    hot_proofs: &mut usize,
 ) -> Option<f64> {
     let limit = super::exceeding_sum(bound, q);
     let reuse = nlgs.settings.reuse_residual_terms;
+    // Shared between ranks, every rank would have to agree on the outcome: the full check.
+    let hot_first = nlgs.settings.hot_first && ranks.is_none();
+    if hot_first && hot_exceeds(nlgs, p, pb, limit) {
+        *hot_proofs += 1;
+        return None;
+    }
+    let rows: usize = p.buckets().map(Bucket::len).sum::<usize>() + dr.len();
+    let above = super::nlgs::hot_threshold(limit, rows);
     let buckets: Vec<&mut Bucket> = p.buckets_mut().collect();
     let mut sums: Vec<Option<f64>> = buckets
         .into_par_iter()
@@ -1207,7 +1277,8 @@ fn residual_within(
                 return None;
             }
             let cache = TermCache::ready(&mut b.terms, b.locals.len(), reuse);
-            nlgs.residual_sum_within(&b.locals, pb, limit, cache)
+            let hot = hot_first.then_some((&mut b.hot, above));
+            nlgs.residual_sum_marking(&b.locals, pb, limit, cache, hot)
         })
         .collect();
     if let Some(r) = ranks {

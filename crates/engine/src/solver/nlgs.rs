@@ -78,6 +78,15 @@ pub struct SolveReport {
     pub residual: f64,
     /// Whether the tolerance was met before the iteration cap.
     pub converged: bool,
+    /// Natural-map residual checks made by the stopping rule (the final evaluation of a
+    /// solve that stopped otherwise not counted).
+    #[serde(default)]
+    pub residual_checks: usize,
+    /// Of these, the checks that the contacts hot at the previous check proved failed
+    /// without a pass over all contacts (see
+    /// [`SolverSettings::hot_first`](super::SolverSettings::hot_first)).
+    #[serde(default)]
+    pub hot_proofs: usize,
 }
 
 /// The NLGS solver (stateless apart from its settings).
@@ -195,6 +204,17 @@ fn bounded_sum(terms: impl Iterator<Item = f64>, limit: f64) -> Option<f64> {
         }
     }
     Some(sum)
+}
+
+/// A contact is hot when its residual term exceeds this many times its share of a sum that
+/// fails a check (the limit over the number of rows): few enough to be summed at a fraction of
+/// a pass, enough to carry most of the residual of a check that fails (see
+/// [`SolverSettings::hot_first`](super::SolverSettings::hot_first)).
+const HOT_TERM: f64 = 3.0;
+
+/// The term above which a contact is hot, for a check with sum limit `limit` over `rows`.
+pub(crate) fn hot_threshold(limit: f64, rows: usize) -> f64 {
+    HOT_TERM * limit / rows.max(1) as f64
 }
 
 /// Every this many sweeps, a solve that skips updates every contact: skipping can then slow
@@ -494,22 +514,72 @@ impl Nlgs {
         limit: f64,
         cache: Option<&mut [TermCache]>,
     ) -> Option<f64> {
+        self.residual_sum_marking(locals, v, limit, cache, None)
+    }
+
+    /// [`Self::residual_sum_within`] that also lists in `hot.0` (cleared first), in order,
+    /// the contacts it visited whose term exceeds `hot.1`.
+    pub(crate) fn residual_sum_marking<B: BodyAccess + ?Sized>(
+        &self,
+        locals: &[LocalProblem],
+        v: &B,
+        limit: f64,
+        cache: Option<&mut [TermCache]>,
+        mut hot: Option<(&mut Vec<u32>, f64)>,
+    ) -> Option<f64> {
+        if let Some((list, _)) = hot.as_mut() {
+            list.clear();
+        }
+        let mut mark = |k: usize, term: f64| {
+            if let Some((list, above)) = hot.as_mut() {
+                if term > *above {
+                    list.push(k as u32);
+                }
+            }
+            term
+        };
         match cache {
             Some(cache) if cache.len() == locals.len() => bounded_sum(
                 locals.iter().zip(cache).enumerate().map(|(k, (c, t))| {
                     ahead(locals, v, k + PREFETCH);
-                    t.term(c, v, |c| self.residual2(c, v))
+                    mark(k, t.term(c, v, |c| self.residual2(c, v)))
                 }),
                 limit,
             ),
             _ => bounded_sum(
                 locals.iter().enumerate().map(|(k, c)| {
                     ahead(locals, v, k + PREFETCH);
-                    self.residual2(c, v)
+                    mark(k, self.residual2(c, v))
                 }),
                 limit,
             ),
         }
+    }
+
+    /// The sum, in order, of the residual terms of the contacts `some` (ascending indices
+    /// into `locals`), read back from `cache` where it holds them.
+    pub(crate) fn residual_sum_of<B: BodyAccess + ?Sized>(
+        &self,
+        locals: &[LocalProblem],
+        v: &B,
+        some: &[u32],
+        cache: Option<&mut [TermCache]>,
+    ) -> f64 {
+        let mut sum = 0.0;
+        match cache {
+            Some(cache) if cache.len() == locals.len() => {
+                for &k in some {
+                    let k = k as usize;
+                    sum += cache[k].term(&locals[k], v, |c| self.residual2(c, v));
+                }
+            }
+            _ => {
+                for &k in some {
+                    sum += self.residual2(&locals[k as usize], v);
+                }
+            }
+        }
+        sum
     }
 
     /// Solves the problem with all contacts in their stored order. `v` holds `V_free` on entry
@@ -547,15 +617,19 @@ impl Nlgs {
         let s = &self.settings;
         let mut stop = StopRule::new();
         let mut cache = Vec::new();
+        let mut hot = Vec::new();
         for k in 1..=s.max_iterations {
             this.for_sweep(k, drift);
             let mut sums = this.sweep_k(k, locals, v, status);
             sums += drive::sweep(drives, v);
             report.iterations = k;
             report.quad = sums.quad();
+            let (checks, proofs) = (&mut report.residual_checks, &mut report.hot_proofs);
             if stop.converged(s, k, report.quad, |bound| {
+                *checks += 1;
                 let terms = TermCache::ready(&mut cache, locals.len(), s.reuse_residual_terms);
-                self.natural_residual_within(locals, drives, v, q, bound, terms)
+                let hot = s.hot_first.then_some((&mut hot, proofs));
+                self.natural_residual_within(locals, drives, v, q, bound, terms, hot)
             }) {
                 report.converged = true;
                 break;
@@ -563,7 +637,7 @@ impl Nlgs {
         }
         report.residual = stop.final_residual(report.iterations, || {
             let terms = TermCache::ready(&mut cache, locals.len(), s.reuse_residual_terms);
-            self.natural_residual_within(locals, drives, v, q, f64::INFINITY, terms)
+            self.natural_residual_within(locals, drives, v, q, f64::INFINITY, terms, None)
                 .unwrap_or(f64::INFINITY)
         });
         report
@@ -571,6 +645,9 @@ impl Nlgs {
 
     /// [`Nlgs::natural_residual`], or `None` as soon as a partial sum shows it exceeds `bound`
     /// (the terms are added in the same order, so a full evaluation gives the same value).
+    /// With `hot` (the contacts hot at the last check, and a count of the checks they
+    /// decided), the hot contacts are summed first (see [`SolverSettings::hot_first`]).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn natural_residual_within(
         &self,
         locals: &[LocalProblem],
@@ -579,8 +656,26 @@ impl Nlgs {
         q: f64,
         bound: f64,
         cache: Option<&mut [TermCache]>,
+        hot: Option<(&mut Vec<u32>, &mut usize)>,
     ) -> Option<f64> {
-        let sum = self.residual_sum_within(locals, v, super::exceeding_sum(bound, q), cache)?;
+        let limit = super::exceeding_sum(bound, q);
+        let mut cache = cache;
+        let sum = match hot {
+            Some((hot, proofs)) => {
+                // As `ddm::hot_exceeds`: a subsequence of the ordered sum of non-negative
+                // terms exceeding the limit proves that the whole sum does, bit for bit.
+                if limit.is_finite()
+                    && !hot.is_empty()
+                    && self.residual_sum_of(locals, v, hot, cache.as_deref_mut()) > limit
+                {
+                    *proofs += 1;
+                    return None;
+                }
+                let above = hot_threshold(limit, locals.len() + drives.len());
+                self.residual_sum_marking(locals, v, limit, cache, Some((hot, above)))?
+            }
+            None => self.residual_sum_within(locals, v, limit, cache)?,
+        };
         Some((sum + drive::residual_sum(drives, v)).sqrt() / q)
     }
 
@@ -593,7 +688,7 @@ impl Nlgs {
         q: f64,
     ) -> f64 {
         // Never `None` without a bound.
-        self.natural_residual_within(locals, drives, v, q, f64::INFINITY, None)
+        self.natural_residual_within(locals, drives, v, q, f64::INFINITY, None, None)
             .unwrap_or(f64::INFINITY)
     }
 }
@@ -674,11 +769,11 @@ mod tests {
         let q = 0.7;
         let r = nlgs.natural_residual(&locals, &[], &bodies, q);
         assert_eq!(
-            nlgs.natural_residual_within(&locals, &[], &bodies, q, r, None),
+            nlgs.natural_residual_within(&locals, &[], &bodies, q, r, None, None),
             Some(r)
         );
         assert_eq!(
-            nlgs.natural_residual_within(&locals, &[], &bodies, q, 0.5 * r, None),
+            nlgs.natural_residual_within(&locals, &[], &bodies, q, 0.5 * r, None, None),
             None
         );
     }

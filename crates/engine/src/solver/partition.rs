@@ -58,11 +58,42 @@ impl Partition {
         balance: Balance,
         weights: &[f64],
     ) -> Self {
+        Self::build_from(
+            positions,
+            dynamic,
+            dims,
+            balance,
+            weights,
+            &mut SortedAxes::default(),
+        )
+    }
+
+    /// [`Partition::build`] starting from the orders of the bodies along the axes that the
+    /// last call left in `sorted`: the bodies move little between steps, so the orders are
+    /// repaired instead of sorted afresh. The same partition whatever `sorted` holds.
+    pub(crate) fn build_from(
+        positions: &[DVec3],
+        dynamic: &[bool],
+        dims: [usize; 3],
+        balance: Balance,
+        weights: &[f64],
+        sorted: &mut SortedAxes,
+    ) -> Self {
         let n = positions.len();
         let dyn_ids: Vec<usize> = (0..n).filter(|&i| dynamic[i]).collect();
         let mut cuts: [Vec<f64>; 3] = Default::default();
         for axis in 0..3 {
-            cuts[axis] = axis_cuts(positions, &dyn_ids, axis, dims[axis], balance, weights);
+            if dims[axis] <= 1 || dyn_ids.is_empty() {
+                continue;
+            }
+            cuts[axis] = match balance {
+                Balance::Volume => volume_cuts(positions, &dyn_ids, axis, dims[axis]),
+                Balance::Contacts => {
+                    let order = &mut sorted.0[axis];
+                    sort_along(positions, dynamic, &dyn_ids, axis, order);
+                    contact_cuts(positions, order, axis, dims[axis], weights)
+                }
+            };
         }
         let mut subdomain = vec![STATIC; n];
         for &i in &dyn_ids {
@@ -103,56 +134,113 @@ impl Partition {
     }
 }
 
-/// Interior cut positions along `axis` (`parts − 1` values, increasing).
-fn axis_cuts(
+/// The orders of the dynamic bodies along each axis (by centre, ties by index) of the last
+/// [`Partition::build_from`], kept by the caller between steps.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SortedAxes([Vec<u32>; 3]);
+
+/// Insertions beyond this many per body: the order is sorted afresh instead of repaired.
+const REPAIR_SHIFTS_PER_BODY: usize = 16;
+
+/// Leaves in `order` the bodies `ids` (ascending, those marked in `dynamic`) sorted by their
+/// centre's coordinate `axis`, ties by index. When `order` already holds the same bodies (the
+/// last step's order) it is repaired by insertion, which costs one pass when few bodies
+/// changed places; else it is sorted afresh. The ordering is total, so the result is the same.
+fn sort_along(
     positions: &[DVec3],
+    dynamic: &[bool],
     ids: &[usize],
     axis: usize,
-    parts: usize,
-    balance: Balance,
-    weights: &[f64],
-) -> Vec<f64> {
-    if parts <= 1 || ids.is_empty() {
-        return Vec::new();
-    }
-    match balance {
-        Balance::Volume => {
-            let (lo, hi) = ids
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
-                    (lo.min(positions[i][axis]), hi.max(positions[i][axis]))
-                });
-            (1..parts)
-                .map(|p| lo + (hi - lo) * p as f64 / parts as f64)
-                .collect()
-        }
-        Balance::Contacts => {
-            let mut sorted: Vec<usize> = ids.to_vec();
-            sorted.sort_by(|&a, &b| {
-                positions[a][axis]
-                    .total_cmp(&positions[b][axis])
-                    .then(a.cmp(&b))
-            });
-            let total: f64 = sorted.iter().map(|&i| weights[i]).sum();
-            let mut cuts = Vec::with_capacity(parts - 1);
-            let mut acc = 0.0;
-            let mut p = 1;
-            for w in sorted.windows(2) {
-                acc += weights[w[0]];
-                while p < parts && acc >= total * p as f64 / parts as f64 {
-                    // Cut midway between two consecutive centres.
-                    cuts.push(0.5 * (positions[w[0]][axis] + positions[w[1]][axis]));
-                    p += 1;
+    order: &mut Vec<u32>,
+) {
+    let before = |a: &(f64, u32), b: &(f64, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+    let same = order.len() == ids.len() && {
+        let mut seen = vec![false; positions.len()];
+        order.iter().all(|&i| {
+            let i = i as usize;
+            let fresh = i < seen.len() && dynamic[i] && !seen[i];
+            if fresh {
+                seen[i] = true;
+            }
+            fresh
+        })
+    };
+    let mut keyed: Vec<(f64, u32)> = if same {
+        order
+            .iter()
+            .map(|&i| (positions[i as usize][axis], i))
+            .collect()
+    } else {
+        ids.iter()
+            .map(|&i| (positions[i][axis], i as u32))
+            .collect()
+    };
+    let repaired = same && {
+        let mut budget = REPAIR_SHIFTS_PER_BODY * keyed.len();
+        let mut done = true;
+        'outer: for k in 1..keyed.len() {
+            let mut j = k;
+            while j > 0 && before(&keyed[j], &keyed[j - 1]).is_lt() {
+                if budget == 0 {
+                    done = false;
+                    break 'outer;
                 }
+                keyed.swap(j, j - 1);
+                budget -= 1;
+                j -= 1;
             }
-            while cuts.len() < parts - 1 {
-                cuts.push(f64::INFINITY);
-            }
-            cuts
         }
+        done
+    };
+    if !repaired {
+        keyed.sort_unstable_by(before);
     }
+    order.clear();
+    order.extend(keyed.iter().map(|&(_, i)| i));
 }
 
+/// Uniform interior cuts (`parts − 1` values, increasing) over the bounding interval of the
+/// centres of `ids` along `axis`.
+fn volume_cuts(positions: &[DVec3], ids: &[usize], axis: usize, parts: usize) -> Vec<f64> {
+    let (lo, hi) = ids
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
+            (lo.min(positions[i][axis]), hi.max(positions[i][axis]))
+        });
+    (1..parts)
+        .map(|p| lo + (hi - lo) * p as f64 / parts as f64)
+        .collect()
+}
+
+/// Interior cuts (`parts − 1` values, increasing) at the weighted quantiles of the bodies
+/// `sorted` (by their coordinate `axis`): midway between the two bodies where the cumulated
+/// weight crosses each `p / parts` of the total (infinite where the bodies run out).
+fn contact_cuts(
+    positions: &[DVec3],
+    sorted: &[u32],
+    axis: usize,
+    parts: usize,
+    weights: &[f64],
+) -> Vec<f64> {
+    let weight = |i: u32| weights[i as usize];
+    let at = |i: u32| positions[i as usize];
+    let total: f64 = sorted.iter().map(|&i| weight(i)).sum();
+    let mut cuts = Vec::with_capacity(parts - 1);
+    let mut acc = 0.0;
+    let mut p = 1;
+    for w in sorted.windows(2) {
+        acc += weight(w[0]);
+        while p < parts && acc >= total * p as f64 / parts as f64 {
+            // Cut midway between two consecutive centres.
+            cuts.push(0.5 * (at(w[0])[axis] + at(w[1])[axis]));
+            p += 1;
+        }
+    }
+    while cuts.len() < parts - 1 {
+        cuts.push(f64::INFINITY);
+    }
+    cuts
+}
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -206,5 +294,58 @@ mod tests {
         );
         let q = Partition::build(&pos, &[true; 100], [2, 1, 1], Balance::Volume, &w);
         assert_eq!(q.starts[1], 50);
+    }
+
+    proptest::proptest! {
+        /// A partition built from the orders left by another scene (moved bodies, another
+        /// dynamic set, or none at all) is the partition built afresh, whatever the number of
+        /// bodies that changed places (few: repaired; many: sorted again).
+        #[test]
+        fn orders_kept_between_steps_change_nothing(
+            seed in 0u64..1_000_000,
+            n in 1usize..300,
+            jitter in proptest::prop_oneof![proptest::strategy::Just(1e-4), proptest::strategy::Just(0.5)],
+            drop_one in proptest::bool::ANY,
+        ) {
+            let mut state = seed;
+            let mut next = || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (state >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let before: Vec<DVec3> = (0..n).map(|_| DVec3::new(next(), next(), next())).collect();
+            // Ties along an axis are broken by index: give some bodies equal coordinates.
+            let after: Vec<DVec3> = before
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    let d = DVec3::new(next(), next(), next()) - 0.5;
+                    if i % 7 == 3 { DVec3::new(0.5, p.y, 0.5) } else { *p + d * jitter }
+                })
+                .collect();
+            let weights: Vec<f64> = (0..n).map(|_| 1.0 + (10.0 * next()).floor()).collect();
+            let mut dynamic = vec![true; n];
+            let mut dynamic_after = dynamic.clone();
+            if drop_one {
+                dynamic_after[n / 2] = false;
+            }
+            dynamic[0] = n == 1 || next() < 0.9;
+            for dims in [[3, 2, 1], [1, 1, 4], [2, 2, 2]] {
+                let mut sorted = SortedAxes::default();
+                let b = Partition::build_from(&before, &dynamic, dims, Balance::Contacts, &weights, &mut sorted);
+                proptest::prop_assert_eq!(&b, &Partition::build(&before, &dynamic, dims, Balance::Contacts, &weights));
+                let a = Partition::build_from(&after, &dynamic_after, dims, Balance::Contacts, &weights, &mut sorted);
+                proptest::prop_assert_eq!(&a, &Partition::build(&after, &dynamic_after, dims, Balance::Contacts, &weights));
+                // The orders left are the sorted orders of the dynamic bodies.
+                let count = dynamic_after.iter().filter(|&&d| d).count();
+                for axis in (0..3).filter(|&axis| dims[axis] > 1 && count > 0) {
+                    let order = &sorted.0[axis];
+                    proptest::prop_assert_eq!(order.len(), count);
+                    for w in order.windows(2) {
+                        let (p, q) = (after[w[0] as usize][axis], after[w[1] as usize][axis]);
+                        proptest::prop_assert!(p < q || (p == q && w[0] < w[1]));
+                    }
+                }
+            }
+        }
     }
 }
