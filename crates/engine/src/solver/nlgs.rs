@@ -655,11 +655,10 @@ impl Nlgs {
         v: &[SolverBody],
         q: f64,
         bound: f64,
-        cache: Option<&mut [TermCache]>,
+        mut cache: Option<&mut [TermCache]>,
         hot: Option<(&mut Vec<u32>, &mut usize)>,
     ) -> Option<f64> {
         let limit = super::exceeding_sum(bound, q);
-        let mut cache = cache;
         let sum = match hot {
             Some((hot, proofs)) => {
                 // As `ddm::hot_exceeds`: a subsequence of the ordered sum of non-negative
