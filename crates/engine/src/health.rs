@@ -402,18 +402,13 @@ impl HealthCheck {
         let mut first: Option<(usize, Quantity, f64)> = None;
         let mut count = 0;
         for i in 0..b.len() {
-            let q = b.orientation[i];
-            let bad = [
-                (Quantity::Position, b.position[i].to_array().to_vec()),
-                (Quantity::Orientation, q.to_array().to_vec()),
-                (Quantity::Velocity, b.velocity[i].to_array().to_vec()),
-                (
-                    Quantity::AngularVelocity,
-                    b.angular_velocity[i].to_array().to_vec(),
-                ),
-            ]
-            .into_iter()
-            .find_map(|(what, xs)| xs.into_iter().find(|x| !x.is_finite()).map(|x| (what, x)));
+            // Runs after every step over every body: no allocation here.
+            let bad_in =
+                |what: Quantity, xs: &[f64]| xs.iter().find(|x| !x.is_finite()).map(|&x| (what, x));
+            let bad = bad_in(Quantity::Position, &b.position[i].to_array())
+                .or_else(|| bad_in(Quantity::Orientation, &b.orientation[i].to_array()))
+                .or_else(|| bad_in(Quantity::Velocity, &b.velocity[i].to_array()))
+                .or_else(|| bad_in(Quantity::AngularVelocity, &b.angular_velocity[i].to_array()));
             if let Some((what, x)) = bad {
                 count += 1;
                 first.get_or_insert((i, what, x));

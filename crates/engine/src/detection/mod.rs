@@ -333,20 +333,29 @@ impl Detector {
         }
         // Half-spaces against every dynamic polyhedron whose box reaches within `alert`.
         let from_broad = pairs.len();
-        for &p in &planes {
-            let (nrm, off) = plane_world(&self.anchors, bodies, p as usize);
-            for &i in &polys {
-                if !dynamic(i) {
-                    continue;
-                }
-                let b = &self.aabbs[i as usize];
-                // Lowest corner of the box along the normal.
-                let lowest = DVec3::select(nrm.cmpge(DVec3::ZERO), b.min, b.max);
-                if nrm.dot(lowest) - off <= 0.5 * alert {
-                    pairs.push((p.min(i), p.max(i)));
-                }
-            }
-        }
+        let walls: Vec<(u32, DVec3, f64)> = planes
+            .iter()
+            .map(|&p| {
+                let (nrm, off) = plane_world(&self.anchors, bodies, p as usize);
+                (p, nrm, off)
+            })
+            .collect();
+        let aabbs = &self.aabbs;
+        // In parallel over the grains (the pairs are sorted below whatever their order).
+        pairs.par_extend(
+            polys
+                .par_iter()
+                .with_min_len(1024)
+                .filter(|&&i| dynamic(i))
+                .flat_map_iter(|&i| {
+                    let b = aabbs[i as usize];
+                    walls.iter().filter_map(move |&(p, nrm, off)| {
+                        // Lowest corner of the box along the normal.
+                        let lowest = DVec3::select(nrm.cmpge(DVec3::ZERO), b.min, b.max);
+                        (nrm.dot(lowest) - off <= 0.5 * alert).then_some((p.min(i), p.max(i)))
+                    })
+                }),
+        );
         // The broad phase's pairs come sorted: sort the half-space pairs alone, then merge.
         pairs[from_broad..].sort_unstable();
         if from_broad > 0 && from_broad < pairs.len() && pairs[from_broad] < pairs[from_broad - 1] {

@@ -81,20 +81,23 @@ impl Partition {
     ) -> Self {
         let n = positions.len();
         let dyn_ids: Vec<usize> = (0..n).filter(|&i| dynamic[i]).collect();
-        let mut cuts: [Vec<f64>; 3] = Default::default();
-        for axis in 0..3 {
+        let cut = |axis: usize, order: &mut Vec<u32>| {
             if dims[axis] <= 1 || dyn_ids.is_empty() {
-                continue;
+                return Vec::new();
             }
-            cuts[axis] = match balance {
+            match balance {
                 Balance::Volume => volume_cuts(positions, &dyn_ids, axis, dims[axis]),
                 Balance::Contacts => {
-                    let order = &mut sorted.0[axis];
                     sort_along(positions, dynamic, &dyn_ids, axis, order);
                     contact_cuts(positions, order, axis, dims[axis], weights)
                 }
-            };
-        }
+            }
+        };
+        // The axes are independent: each sorts its own order, on its own thread.
+        let [ox, oy, oz] = &mut sorted.0;
+        let ((cx, cy), cz) =
+            rayon::join(|| rayon::join(|| cut(0, ox), || cut(1, oy)), || cut(2, oz));
+        let cuts = [cx, cy, cz];
         let mut subdomain = vec![STATIC; n];
         for &i in &dyn_ids {
             let mut idx = [0usize; 3];
