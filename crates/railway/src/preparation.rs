@@ -299,7 +299,7 @@ struct Key<'a> {
 
 const MAGIC: &[u8] = b"BALLASTSAMPLE";
 /// Bumped when the preparation's algorithm changes, so older cached beds are not reused.
-const FORMAT: u32 = 6;
+const FORMAT: u32 = 7;
 
 /// The overlap correction of the healing stage: half of each overlap removed per step, but
 /// at most half the alert distance (a deep overlap heals over several steps, each moving the

@@ -40,6 +40,6 @@ pub fn plane_polyhedron(
             });
         }
     }
-    reduce_to_four(&mut points, n);
+    reduce_to_four(&mut points, n, alert);
     Some(Manifold { normal: n, points })
 }

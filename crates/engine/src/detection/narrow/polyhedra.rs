@@ -14,16 +14,19 @@
 //!    to be exact, and otherwise every edge pair is tested again (see `edge_axis`).
 //! 3. The axis of largest separation wins, faces before edges and A's faces before B's within a
 //!    small tolerance, which keeps face–face manifolds stable (a face is skipped if its clipped
-//!    points do not reach the axis depth, see `choose`). A face axis gives a reference face
+//!    points do not reach the axis depth, see `choose`); an edge pair must moreover beat the
+//!    best face by 10 % of its depth (see `EDGE_BIAS_RELATIVE`). A face axis gives a reference face
 //!    and an incident face on the other body; the incident polygon is clipped by the side planes
 //!    of the reference face (Sutherland–Hodgman); every clipped point within the alert distance,
 //!    and every other vertex of the incident body within it above the reference face, becomes a
 //!    contact point. An edge axis gives one point between the closest points of the two edges,
-//!    and, when a face next to either edge is nearly orthogonal to the axis, the points of that
-//!    face clipped along the axis (an edge lying across a face has two ends, see `edge_manifold`).
+//!    and, when a face next to either edge is nearly orthogonal to the axis or is the face the
+//!    preference chose but had to skip, the points of that face clipped along the axis (an edge
+//!    lying across a face has two ends, see `edge_manifold`).
 //!
 //! Touching or overlapping, the largest separation over these axes is minus the penetration
-//! depth (the largest over all directions). Apart, another direction (say, for two vertices
+//! depth (the largest over all directions); a face preferred to an edge pair reports a depth
+//! at most that preference deeper. Apart, another direction (say, for two vertices
 //! facing each other) may separate the bodies a little more, so a pair slightly farther apart
 //! than the alert distance can still get a manifold, with gaps positive up to the preference
 //! tolerance.
@@ -46,6 +49,19 @@ use crate::math::DVec3;
 /// chosen. Relative to the *smaller* body so that a grain on a 20 m box keeps a tolerance at the
 /// grain's scale (it bounds the error on the deepest gap).
 const PREFER_RELATIVE: f64 = 1e-5;
+/// An edge pair is chosen over the best face only if it separates the bodies by more than that
+/// face does by this fraction of the face's separation (its depth, when they overlap) plus
+/// [`EDGE_BIAS_ABSOLUTE`] of the smaller circumradius (after Gregorius's relative and absolute
+/// face preference), or if it separates bodies that the face finds overlapping. A grain's face
+/// resting across another's ridge of nearly coplanar triangles has an edge pair as its deepest
+/// axis, whose manifold keeps the face's points only while the face is within
+/// [`EDGE_FACE_COS`] of the axis: as the grain rocks, the contact collapses to one point for a
+/// step and the grain tips in by a millimetre. The face axis keeps the face's points whatever
+/// the rocking, with a depth at most the bias deeper than the exact one; bodies apart never get
+/// an overlap.
+const EDGE_BIAS_RELATIVE: f64 = 0.1;
+/// See [`EDGE_BIAS_RELATIVE`].
+const EDGE_BIAS_ABSOLUTE: f64 = 1e-3;
 /// Edge pairs whose directions make an angle with squared sine below this are parallel: their
 /// cross product has no reliable direction, and the face axes already cover them.
 const PARALLEL_SIN2: f64 = 1e-20;
@@ -70,11 +86,13 @@ const STACK_POLYGON: usize = 48;
 /// The normal points from `a` toward `b`; each point lies midway between the two surfaces and
 /// carries its gap (negative when overlapping), at most `alert`. At most four points, reduced by
 /// [`reduce_to_four`]. Face contacts give up to four points, edge–edge contacts one, or more
-/// when a face next to either edge is within 2.6° of face-on.
+/// when a face next to either edge is within 2.6° of face-on or within the face preference.
 ///
 /// Touching or overlapping, the deepest gap is minus the exact penetration depth (up to the
-/// axis preference tolerance, `1e-5` of the smaller circumradius). Apart within `alert`, gaps
-/// are at least the separation along the chosen axis, which is positive up to that tolerance.
+/// axis preference tolerance, `1e-5` of the smaller circumradius), or deeper by at most the
+/// face preference over edge pairs (10 % of the depth plus `1e-3` of the smaller circumradius).
+/// Apart within `alert`, gaps are at least the separation along the chosen axis, which is
+/// positive up to the preference tolerance.
 ///
 /// # Panics
 ///
@@ -184,12 +202,14 @@ fn sat(
     // First pass: only the edges near the other body, valid when the manifold proves that the
     // bodies are within `near` of each other. Otherwise, all edge pairs.
     let edge = edge_axis(a, b, alert, floor, Some((&*far_a, &*far_b))).ok_or(FaceHint::NONE)?;
-    let (mut manifold, witness) = choose(a, b, &face_a, &face_b, edge, alert, tol);
+    let bias =
+        EDGE_BIAS_RELATIVE * floor.abs() + EDGE_BIAS_ABSOLUTE * a.shape.radius.min(b.shape.radius);
+    let (mut manifold, witness) = choose(a, b, &face_a, &face_b, edge, alert, tol, bias);
     if witness > near || witness.is_nan() {
         let edge = edge_axis(a, b, alert, floor, None).ok_or(FaceHint::NONE)?;
-        manifold = choose(a, b, &face_a, &face_b, edge, alert, tol).0;
+        manifold = choose(a, b, &face_a, &face_b, edge, alert, tol, bias).0;
     }
-    reduce_to_four(&mut manifold.points, manifold.normal);
+    reduce_to_four(&mut manifold.points, manifold.normal, alert);
     let best = if face_b.sep > face_a.sep {
         FaceHint::new(true, face_b.face)
     } else {
@@ -201,10 +221,13 @@ fn sat(
 /// The manifold of the axis of largest separation, with its witness distance (see
 /// [`face_manifold`], [`edge_manifold`]).
 ///
-/// Among the axes within `tol` of the largest separation, A's face comes first, then B's face,
-/// then the edge pair. A face is taken only if its clipped points reach the depth of the axis
-/// (within `tol`): a face axis merely tied with the true contact feature may clip to nothing
-/// representative, e.g. when two edges touch beside a face.
+/// The edge pair counts as the largest separation only when it beats the best face by more
+/// than `bias` (see [`EDGE_BIAS_RELATIVE`]). Among the axes within `tol` of the largest
+/// separation, A's face comes first, then B's face, then the edge pair. A face is taken only if
+/// its clipped points reach the depth of the axis (within `tol`): a face axis merely tied with
+/// the true contact feature may clip to nothing representative, e.g. when two edges touch
+/// beside a face.
+#[allow(clippy::too_many_arguments)]
 fn choose(
     a: &WorldPolyhedron,
     b: &WorldPolyhedron,
@@ -213,13 +236,25 @@ fn choose(
     edge: Option<EdgeAxis>,
     alert: f64,
     tol: f64,
+    bias: f64,
 ) -> (Manifold, f64) {
-    let best = face_a
-        .sep
-        .max(face_b.sep)
-        .max(edge.as_ref().map_or(f64::NEG_INFINITY, |e| e.sep));
+    let faces = face_a.sep.max(face_b.sep);
+    let edge_sep = edge.as_ref().map_or(f64::NEG_INFINITY, |e| e.sep);
+    // NaN separations fall through to the largest one, as without the bias.
+    let edge_wins = edge_sep > faces + bias || (edge_sep > 0.0 && faces <= 0.0);
+    let best = if edge_wins || faces.is_nan() {
+        faces.max(edge_sep)
+    } else {
+        faces
+    };
     let mut first = None;
-    for (axis, r, o, flip) in [(face_a, a, b, false), (face_b, b, a, true)] {
+    // The faces tried and refused, in that order: an edge manifold takes the first one next to
+    // its edges as its face (see `edge_faces`).
+    let mut refused = [None; 2];
+    for (k, (axis, r, o, flip)) in [(face_a, a, b, false), (face_b, b, a, true)]
+        .into_iter()
+        .enumerate()
+    {
         if axis.sep >= best - tol {
             let (manifold, witness) = face_manifold(r, o, axis, alert, flip);
             let deepest = manifold
@@ -230,10 +265,11 @@ fn choose(
                 return (manifold, witness);
             }
             first.get_or_insert((manifold, witness));
+            refused[k] = Some((flip, axis.face));
         }
     }
     match (edge, first) {
-        (Some(e), _) if e.sep >= best - tol => edge_manifold(a, b, &e, alert),
+        (Some(e), _) if e.sep >= best - tol => edge_manifold(a, b, &e, alert, refused),
         (_, Some(first)) => first,
         // Unreachable: the best axis is a face or the edge pair.
         _ => face_manifold(a, b, face_a, alert, false),
@@ -683,7 +719,8 @@ fn clip(input: &[DVec3], out: &mut [DVec3], side: DVec3, offset: f64) -> usize {
 /// axis separation as gap, and their distance as witness distance.
 ///
 /// When a face next to one of the edges is nearly orthogonal to the axis (within
-/// [`EDGE_FACE_COS`]), the bodies are close to face-on over more than that point: e.g. an edge
+/// [`EDGE_FACE_COS`]), or is a face that [`choose`] preferred but refused (`refused`), the
+/// bodies are close to face-on over more than that point: e.g. an edge
 /// of B lying across a face of A, sunk a little more at one end. The point alone then jumps
 /// between the two ends of the contact as the bodies rock (each end is the deepest in turn, with
 /// a different edge of A), and the torque of a single point pumps the rocking. So the manifold
@@ -698,6 +735,7 @@ fn edge_manifold(
     b: &WorldPolyhedron,
     axis: &EdgeAxis,
     alert: f64,
+    refused: [Option<(bool, usize)>; 2],
 ) -> (Manifold, f64) {
     let ea = a.shape.edges[axis.edge_a];
     let eb = b.shape.edges[axis.edge_b];
@@ -720,7 +758,7 @@ fn edge_manifold(
         o,
         inc_face,
         dir,
-    }) = edge_faces(a, b, axis)
+    }) = edge_faces(a, b, axis, refused)
     {
         let (m, d) = (r.face_normals[ref_face], r.face_offsets[ref_face]);
         let along = m.dot(dir);
@@ -766,10 +804,18 @@ fn edge_faces<'w, 's>(
     a: &'w WorldPolyhedron<'s>,
     b: &'w WorldPolyhedron<'s>,
     axis: &EdgeAxis,
+    refused: [Option<(bool, usize)>; 2],
 ) -> Option<EdgeFaces<'w, 's>> {
     let n = axis.normal;
     let faces_a = a.shape.edge_faces[axis.edge_a];
     let faces_b = b.shape.edge_faces[axis.edge_b];
+    // A face within the face preference of the axis that `choose` refused (its clipped points
+    // fall short of its depth, the deepest vertex lying beyond it): it is the face the
+    // contact is nearly on, whatever its angle, so it takes the cone's place.
+    let adjacent = |&(of_b, f): &(bool, usize)| {
+        let faces = if of_b { faces_b } else { faces_a };
+        faces.contains(&(f as u32))
+    };
     let mut best: Option<(bool, usize)> = None;
     let mut best_cos = EDGE_FACE_COS;
     for (of_b, body, faces, sign) in [(false, a, faces_a, 1.0), (true, b, faces_b, -1.0)] {
@@ -781,7 +827,7 @@ fn edge_faces<'w, 's>(
             }
         }
     }
-    let (of_b, ref_face) = best?;
+    let (of_b, ref_face) = refused.iter().flatten().copied().find(adjacent).or(best)?;
     let (r, o, dir, inc_faces) = if of_b {
         (b, a, -n, faces_a)
     } else {

@@ -1,10 +1,14 @@
 //! Manifold reduction: merge coincident points, then keep at most four.
 //!
-//! The four kept points follow the Bullet/Rapier heuristic: the deepest point (it carries the
-//! penetration), the point farthest from it, the point maximising the triangle area, then the
-//! point farthest outside that triangle (maximising the quadrilateral area). Everything is
-//! measured in the plane orthogonal to the normal, and ties go to the lowest index, so the result
-//! depends only on the input order.
+//! The four kept points follow the Bullet/Rapier heuristic, weighted by how far each point is
+//! into the contact (as Jolt weights its pruning by penetration): the deepest point (it carries
+//! the penetration), then the point maximising its squared distance from it, the triangle area,
+//! and the area added outside that triangle, each times the point's weight `reach − gap`
+//! (`reach` the largest gap a point may have, the alert distance). Unweighted, a point just
+//! inside the alert distance could displace a deep one beside it: a grain's steep corner then
+//! loses its deepest point for a step, the contact gives way and the grain is driven in by a
+//! millimetre. Distances and areas are measured in the plane orthogonal to the normal, and
+//! ties go to the lowest index, so the result depends only on the input order.
 
 use super::ManifoldPoint;
 use crate::math::DVec3;
@@ -24,27 +28,37 @@ const COLLINEAR: f64 = 1e-12;
 ///
 /// Points closer than a tiny tolerance (`1e-6` of the manifold's extent, at least a few ulps of
 /// the coordinates) are merged, keeping the deepest (smallest gap). If more than four remain, the
-/// deepest, the farthest from it, the one maximising the triangle area and the one farthest
-/// outside that triangle are kept, in that order; distances and areas are measured in the plane
-/// orthogonal to `normal` (a unit vector). Deterministic: ties go to the lowest index.
-pub fn reduce_to_four(points: &mut Vec<ManifoldPoint>, normal: DVec3) {
+/// deepest is kept, then the point maximising its weight `reach − gap` times, in turn, its
+/// squared distance from the deepest, the area of the triangle it makes with the first two, and
+/// the area it adds outside that triangle. `reach` is the largest gap a point may have (the
+/// alert distance): a point at it weighs nothing beside a touching one. Distances and areas are
+/// measured in the plane orthogonal to `normal` (a unit vector). Deterministic: ties go to the
+/// lowest index.
+pub fn reduce_to_four(points: &mut Vec<ManifoldPoint>, normal: DVec3, reach: f64) {
     merge_duplicates(points);
     if points.len() <= 4 {
         return;
     }
 
     let tangential = |d: DVec3| d - normal * normal.dot(d);
+    // A floor keeps every weight positive, so that a point distinct from the first always
+    // beats it, even when every other point lies at `reach`.
+    let floor = 1e-9 * reach.abs() + f64::MIN_POSITIVE;
+    let weight = |p: &ManifoldPoint| (reach - p.gap).max(0.0) + floor;
 
     // 1. Deepest point.
     let (i0, _) = argmax(points, |p| -p.gap);
     let p0 = points[i0].point;
     // 2. Farthest from it.
-    let (i1, _) = argmax(points, |p| tangential(p.point - p0).length_squared());
+    let (i1, _) = argmax(points, |p| {
+        tangential(p.point - p0).length_squared() * weight(p)
+    });
     let p1 = points[i1].point;
     // 3. Largest triangle (p0, p1, p).
     let e01 = p1 - p0;
-    let (i2, area) = argmax(points, |p| e01.cross(p.point - p0).dot(normal).abs());
-    if area <= COLLINEAR * e01.length_squared() {
+    let area = |p: &ManifoldPoint| e01.cross(p.point - p0).dot(normal).abs();
+    let (i2, _) = argmax(points, |p| area(p) * weight(p));
+    if area(&points[i2]) <= COLLINEAR * e01.length_squared() {
         // All points on the line through p0 and p1: keep the deepest and both extremes.
         let (i2, _) = argmax(points, |p| tangential(p.point - p1).length_squared());
         keep(points, &[i0, i1, i2]);
@@ -62,7 +76,7 @@ pub fn reduce_to_four(points: &mut Vec<ManifoldPoint>, normal: DVec3) {
             // Positive when `p` lies outside edge (a, b) of the triangle.
             best = best.max(-orient * (b - a).cross(p.point - a).dot(normal));
         }
-        best
+        best * weight(p)
     });
     keep(points, &[i0, i1, i2, i3]);
 }
