@@ -14,7 +14,7 @@
 use crate::bodies::{BodyKind, BodySet, Limits};
 use crate::contacts::ContactSet;
 use crate::detection::{Detector, RawContact};
-use crate::laws::{default_overlap_cap, Elastic, FrictionTable, NormalLaw};
+use crate::laws::{default_overlap_cap, driven_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::build_local_problems;
@@ -76,7 +76,8 @@ pub struct StepSettings {
     #[serde(default, skip_serializing_if = "NormalLaw::is_rate")]
     pub normal_law: NormalLaw,
     /// With [`NormalLaw::Overlap`]: the deepest overlap (m) whose elastic force a step starts
-    /// from (below `max_closure`); `None`: [`default_overlap_cap`].
+    /// from (below `max_closure`); `None`: [`default_overlap_cap`]. A contact with a body that
+    /// is not dynamic has the larger cap [`driven_overlap_cap`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub overlap_cap: Option<f64>,
     /// Overlap recovery of the compliant law, β ∈ [0, 1]: the fraction of a contact's overlap
@@ -463,16 +464,21 @@ impl World {
         )
     }
 
-    /// The elastic law and the overlap cap with [`NormalLaw::Overlap`] on compliant contacts
-    /// (see [`build_local_problems`]); `None` for the rate form and for rigid contacts.
-    fn overlap_law(&self) -> Option<(Elastic, f64)> {
+    /// The elastic law and the overlap caps (between grains, and of a grain against a body
+    /// that is not dynamic) with [`NormalLaw::Overlap`] on compliant contacts (see
+    /// [`build_local_problems`]); `None` for the rate form and for rigid contacts.
+    fn overlap_law(&self) -> Option<(Elastic, [f64; 2])> {
         let s = &self.settings;
         match (s.normal_law, s.contact_stiffness) {
-            (NormalLaw::Overlap, Some(_)) => Some((
-                self.nlgs().elastic(),
-                s.overlap_cap
-                    .unwrap_or_else(|| default_overlap_cap(s.max_closure)),
-            )),
+            (NormalLaw::Overlap, Some(_)) => {
+                let cap = s
+                    .overlap_cap
+                    .unwrap_or_else(|| default_overlap_cap(s.max_closure));
+                Some((
+                    self.nlgs().elastic(),
+                    [cap, driven_overlap_cap(cap, s.max_closure)],
+                ))
+            }
             _ => None,
         }
     }

@@ -526,23 +526,7 @@ fn a_sliding_block_rides_at_its_deflection_with_the_overlap_law() {
         bodies.velocity[b] = DVec3::new(2.0, 0.0, 0.0);
         let m = bodies.mass(b);
         let k = 1e4;
-        let settings = StepSettings {
-            dt: 1e-3,
-            theta: 0.6,
-            contact_stiffness: Some(k),
-            normal_law: law,
-            solver: SolverSettings {
-                tolerance: 1e-10,
-                max_iterations: 10_000,
-                norm: ConvergenceNorm::NaturalMap,
-                ..Default::default()
-            },
-            correction: CorrectionSettings {
-                fraction: 0.0,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
+        let settings = tight_settings(k, law, None);
         let mut w = World::new(bodies, FrictionTable::new(0.0), settings);
         for _ in 0..2000 {
             assert!(w.step().solve.converged);
@@ -559,6 +543,76 @@ fn a_sliding_block_rides_at_its_deflection_with_the_overlap_law() {
         sink > 100.0 * deflection,
         "rate form: sank {sink:e} m, deflection {deflection:e} m"
     );
+}
+
+/// Compliant contacts of stiffness `k` under `law` (and a maximum closure), solved to a
+/// natural-map residual of 1e-10, the overlap correction off: only the law holds the bodies.
+fn tight_settings(k: f64, law: NormalLaw, max_closure: Option<f64>) -> StepSettings {
+    StepSettings {
+        dt: 1e-3,
+        theta: 0.6,
+        contact_stiffness: Some(k),
+        max_closure,
+        normal_law: law,
+        solver: SolverSettings {
+            tolerance: 1e-10,
+            max_iterations: 10_000,
+            norm: ConvergenceNorm::NaturalMap,
+            ..Default::default()
+        },
+        correction: CorrectionSettings {
+            fraction: 0.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+/// The overlap law's cap against a body that is not dynamic (`driven_overlap_cap`): a cube
+/// pressing each of its four corners on a fixed floor with `6 k V_m`, above the grain cap's
+/// `4 k V_m` (0.8 `V_m`) and below the driven cap's `9 k V_m` (0.9 `V_m`), rests at the
+/// hyperbola's deflection `6/7 V_m` (to 1e-6 of it); the same cube on another cube (two
+/// dynamic bodies, the grain cap) restarts each step below its load and sinks past `V_m`
+/// (the correction off, so that only the law holds it).
+#[test]
+fn a_body_pressed_on_a_fixed_floor_rests_at_the_hyperbola_beyond_the_grain_cap() {
+    let (k, vm, h) = (1e4, 1e-4, 0.01);
+    let load = 6.0 * k * vm;
+    let sink = |on_cube: bool| {
+        let mut bodies = BodySet::default();
+        bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
+        let mut z = h;
+        if on_cube {
+            // A light cube on the floor: its corners carry the load and its own weight.
+            let mut low = ConvexPolyhedron::cuboid(DVec3::splat(h)).unwrap();
+            low.position = DVec3::new(0.0, 0.0, h);
+            bodies.add_polyhedron(low, 100.0, BodyKind::Dynamic, 1);
+            z = 3.0 * h;
+        }
+        let mut top = ConvexPolyhedron::cuboid(DVec3::splat(h)).unwrap();
+        top.position = DVec3::new(0.0, 0.0, z);
+        let density = 4.0 * load / G / (8.0 * h * h * h);
+        let b = bodies.add_polyhedron(top, density, BodyKind::Dynamic, 1);
+        let settings = tight_settings(k, NormalLaw::Overlap, Some(vm));
+        let mut w = World::new(bodies, FrictionTable::new(0.0), settings);
+        for _ in 0..3000 {
+            w.step();
+        }
+        let below = if on_cube {
+            w.bodies.position[1].z + h
+        } else {
+            0.0
+        };
+        below + h - w.bodies.position[b].z
+    };
+    let on_floor = sink(false);
+    let expected = 6.0 / 7.0 * vm;
+    assert!(
+        (on_floor - expected).abs() <= 1e-6 * expected,
+        "on the floor: {on_floor:e} m, hyperbola {expected:e} m"
+    );
+    let on_cube = sink(true);
+    assert!(on_cube > vm, "on a cube: {on_cube:e} m, V_m {vm:e} m");
 }
 
 /// `[simulation] normal_law` and `overlap_cap`: `"rate"` is the default (the same digest as no

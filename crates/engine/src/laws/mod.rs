@@ -5,6 +5,6 @@ pub mod closure;
 pub mod coulomb;
 pub mod friction;
 
-pub use closure::{default_overlap_cap, Elastic, NormalLaw};
+pub use closure::{default_overlap_cap, driven_overlap_cap, Elastic, NormalLaw};
 pub use coulomb::{solve_local, ContactStatus};
 pub use friction::FrictionTable;

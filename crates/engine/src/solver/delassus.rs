@@ -5,7 +5,7 @@
 //! matrix, its inverse computed when needed; the frame as `[n, t]`): the sweep is memory-bound at large scale, so `r × e_k` and `I⁻¹ (r × P)` are recomputed from the lever arms and the
 //! body's inverse inertia, which stays in cache across that body's contacts.
 
-use crate::bodies::BodySet;
+use crate::bodies::{BodyKind, BodySet};
 use crate::contacts::ContactSet;
 use crate::laws::Elastic;
 use crate::math::{skew, DMat3, DVec3, Sym3};
@@ -221,16 +221,18 @@ pub(crate) fn delassus_block(
 /// starting from the contacts' impulses with `warm_start`, else from zero. `attach[i]` is the
 /// body whose velocities body `i` takes (itself, or the body it is a rigid part of; empty:
 /// every body is itself): a contact on an attached part acts on that body, with the lever arm
-/// from its centre of mass. `overlap_law`: the elastic law and the overlap cap of
+/// from its centre of mass. `overlap_law`: the elastic law and the overlap caps of
 /// [`crate::laws::NormalLaw::Overlap`] (the compliant law starts from the force the capped
-/// overlap holds); `None` for the rate form (from the force the contact carried).
+/// overlap holds), between two dynamic bodies and with a body that is not dynamic (see
+/// [`crate::laws::driven_overlap_cap`]); `None` for the rate form (from the force the contact
+/// carried).
 pub(crate) fn build_local_problems(
     contacts: &ContactSet,
     warm_start: bool,
     bodies: &BodySet,
     solver_bodies: &[SolverBody],
     attach: &[u32],
-    overlap_law: Option<(Elastic, f64)>,
+    overlap_law: Option<(Elastic, [f64; 2])>,
     out: &mut Vec<LocalProblem>,
 ) {
     use rayon::prelude::*;
@@ -273,7 +275,11 @@ pub(crate) fn build_local_problems(
                 },
                 // The compliant law's starting force: remembered, or held by the overlap.
                 r_prev: match overlap_law {
-                    Some((e, cap)) => e.impulse_at((-contacts.gap[k]).min(cap)),
+                    Some((e, [cap, driven])) => {
+                        let dynamic = |b: u32| bodies.kind[b as usize] == BodyKind::Dynamic;
+                        let both = dynamic(contacts.body1[k]) && dynamic(contacts.body2[k]);
+                        e.impulse_at((-contacts.gap[k]).min(if both { cap } else { driven }))
+                    }
                     None => contacts.impulse[k].x,
                 },
                 rt_prev: [contacts.impulse[k].y as f32, contacts.impulse[k].z as f32],
