@@ -28,20 +28,8 @@ fn cube_on_floor(stiffness: Option<f64>, theta: f64) -> (World, f64) {
     let b = bodies.add_polyhedron(cube, 2700.0, BodyKind::Dynamic, 1);
     let m = bodies.mass(b);
     let settings = StepSettings {
-        dt: 1e-3,
         theta,
-        contact_stiffness: stiffness,
-        solver: SolverSettings {
-            tolerance: 1e-10,
-            max_iterations: 10_000,
-            norm: ConvergenceNorm::NaturalMap,
-            ..Default::default()
-        },
-        correction: CorrectionSettings {
-            fraction: 0.0,
-            ..Default::default()
-        },
-        ..Default::default()
+        ..tight_settings(stiffness, NormalLaw::Rate, None)
     };
     (World::new(bodies, FrictionTable::new(0.8), settings), m)
 }
@@ -526,7 +514,7 @@ fn a_sliding_block_rides_at_its_deflection_with_the_overlap_law() {
         bodies.velocity[b] = DVec3::new(2.0, 0.0, 0.0);
         let m = bodies.mass(b);
         let k = 1e4;
-        let settings = tight_settings(k, law, None);
+        let settings = tight_settings(Some(k), law, None);
         let mut w = World::new(bodies, FrictionTable::new(0.0), settings);
         for _ in 0..2000 {
             assert!(w.step().solve.converged);
@@ -545,13 +533,14 @@ fn a_sliding_block_rides_at_its_deflection_with_the_overlap_law() {
     );
 }
 
-/// Compliant contacts of stiffness `k` under `law` (and a maximum closure), solved to a
-/// natural-map residual of 1e-10, the overlap correction off: only the law holds the bodies.
-fn tight_settings(k: f64, law: NormalLaw, max_closure: Option<f64>) -> StepSettings {
+/// Contacts of stiffness `k` (`None`: rigid) under `law` (and a maximum closure), θ = 0.6,
+/// solved to a natural-map residual of 1e-10, the overlap correction off: only the law holds
+/// the bodies.
+fn tight_settings(k: Option<f64>, law: NormalLaw, max_closure: Option<f64>) -> StepSettings {
     StepSettings {
         dt: 1e-3,
         theta: 0.6,
-        contact_stiffness: Some(k),
+        contact_stiffness: k,
         max_closure,
         normal_law: law,
         solver: SolverSettings {
@@ -593,7 +582,7 @@ fn a_body_pressed_on_a_fixed_floor_rests_at_the_hyperbola_beyond_the_grain_cap()
         top.position = DVec3::new(0.0, 0.0, z);
         let density = 4.0 * load / G / (8.0 * h * h * h);
         let b = bodies.add_polyhedron(top, density, BodyKind::Dynamic, 1);
-        let settings = tight_settings(k, NormalLaw::Overlap, Some(vm));
+        let settings = tight_settings(Some(k), NormalLaw::Overlap, Some(vm));
         let mut w = World::new(bodies, FrictionTable::new(0.0), settings);
         for _ in 0..3000 {
             w.step();
