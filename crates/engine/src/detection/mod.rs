@@ -362,8 +362,8 @@ impl Detector {
             merge_sorted(&pairs[..from_broad], &pairs[from_broad..], &mut self.merged);
             std::mem::swap(&mut pairs, &mut self.merged);
         }
-        // Each pair: last step's outcome, found by a binary search (parallel, no serial merge),
-        // reused if neither body was re-anchored, else computed at the anchors with its hint.
+        // Each pair: last step's outcome (parallel, no serial merge), reused if neither body
+        // was re-anchored, else computed at the anchors with its hint.
         let mut results = std::mem::take(&mut self.spare_results);
         let exchange = self.exchange.clone().filter(|e| e.size() > 1);
         let this = &*self;
@@ -408,14 +408,25 @@ impl Detector {
         };
         let shared = match exchange.as_deref() {
             None => {
-                pairs
-                    .par_iter()
-                    .with_min_len(32)
-                    .map(|&pair| {
-                        let last = last_of(pair);
-                        reused(pair, last).unwrap_or_else(|| compute(pair, last))
-                    })
-                    .collect_into_vec(&mut results);
+                // Both lists are sorted: each run of pairs bisects for its first pair's
+                // outcome, then walks forward with the pairs (a bisection per pair costs more
+                // than reusing its manifold).
+                const PAIRS_PER_TASK: usize = 128;
+                results.clear();
+                results.resize(pairs.len(), PairGeometry::new(0, 0, None, FaceHint::NONE));
+                results
+                    .par_chunks_mut(PAIRS_PER_TASK)
+                    .zip(pairs.par_chunks(PAIRS_PER_TASK))
+                    .for_each(|(out, run)| {
+                        let mut p = previous_pairs.partition_point(|q| *q < run[0]);
+                        for (slot, &pair) in out.iter_mut().zip(run) {
+                            while p < previous_pairs.len() && previous_pairs[p] < pair {
+                                p += 1;
+                            }
+                            let last = (previous_pairs.get(p) == Some(&pair)).then(|| &previous[p]);
+                            *slot = reused(pair, last).unwrap_or_else(|| compute(pair, last));
+                        }
+                    });
                 0.0
             }
             Some(ex) => ranks::narrow_on_ranks(

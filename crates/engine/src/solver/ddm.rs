@@ -217,6 +217,9 @@ pub struct DdmProblem {
     members: Vec<Vec<u32>>,
     /// Per caller contact: its bucket (in the equivalent order) and its place there.
     slot: Vec<(u32, u32)>,
+    /// The interface groups' buckets of the step before, emptied: the next groups take
+    /// them, so that Γ's local problems are not copied again as their vectors grow.
+    spare: Vec<Bucket>,
 }
 
 impl DdmProblem {
@@ -292,13 +295,17 @@ impl DdmProblem {
             });
         // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily.
         gamma.sort_unstable();
-        self.groups.clear();
+        for g in self.groups.drain(..) {
+            let mut bucket = g.bucket;
+            bucket.clear();
+            self.spare.push(bucket);
+        }
         for (pair, idx) in gamma {
             if self.groups.last().is_none_or(|g| g.pair != pair) {
                 self.groups.push(InterfaceGroup {
                     pair,
                     colour: 0,
-                    bucket: Bucket::default(),
+                    bucket: self.spare.pop().unwrap_or_default(),
                 });
             }
             let group = self.groups.last_mut().expect("pushed above");
