@@ -29,7 +29,7 @@ enum Command {
     /// Run a scenario file (TOML), or a built-in track scenario: with no file, the default
     /// tamping job (one sleeper block, its 4 tines, the paper's 1.764 s cycle).
     Run {
-        /// Scenario file (engine scenario, or track scenario with a [track] table).
+        /// Scenario file (engine scenario, or track scenario with a `[track]` table).
         file: Option<PathBuf>,
         /// Built-in track scenario when no file is given: default, paper.
         #[arg(long, conflicts_with = "file")]
@@ -60,7 +60,7 @@ enum Command {
         #[arg(long)]
         threads: Option<usize>,
         /// Domain decomposition into NXxNYxNZ subdomains (e.g. 1x7x1); overrides the
-        /// scenario's [ddm] subdomains, 1x1x1 = monolithic NLGS.
+        /// scenario's `[ddm]` subdomains, 1x1x1 = monolithic NLGS.
         #[arg(long, value_parser = parse_subdomains)]
         subdomains: Option<[usize; 3]>,
         /// No progress output.

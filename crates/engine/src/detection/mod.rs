@@ -495,6 +495,12 @@ fn write_points(
             for r in chunk {
                 let (b1, b2) = (r.body1 as usize, r.body2 as usize);
                 let still = !transport || anchors.is_at_anchor(b1) && anchors.is_at_anchor(b2);
+                // The pair's normal turns with body 1, the same for all its points.
+                let normal = if still {
+                    r.normal
+                } else {
+                    anchors.turn(b1, r.normal)
+                };
                 for p in r.points() {
                     let Some(slot) = d.next() else { return };
                     *slot = if still {
@@ -508,7 +514,6 @@ fn write_points(
                     } else {
                         let foot1 = anchors.transport(bodies, b1, p.point - 0.5 * p.gap * r.normal);
                         let foot2 = anchors.transport(bodies, b2, p.point + 0.5 * p.gap * r.normal);
-                        let normal = anchors.turn(b1, r.normal);
                         RawContact {
                             body1: r.body1,
                             body2: r.body2,
