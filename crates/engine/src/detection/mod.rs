@@ -412,7 +412,7 @@ impl Detector {
                 // outcome, then walks forward with the pairs (a bisection per pair costs more
                 // than reusing its manifold).
                 const PAIRS_PER_TASK: usize = 128;
-                results.clear();
+                // Every slot is written below: only new ones need a value.
                 results.resize(pairs.len(), PairGeometry::new(0, 0, None, FaceHint::NONE));
                 results
                     .par_chunks_mut(PAIRS_PER_TASK)
@@ -508,7 +508,7 @@ fn write_points(
                             body1: r.body1,
                             body2: r.body2,
                             point: p.point,
-                            normal: r.normal,
+                            normal,
                             gap: p.gap,
                         }
                     } else {
