@@ -54,9 +54,11 @@ fn time_case(
             w.step();
         }
         let m = measure(&mut w, steps);
-        // Interface share of the last step's contacts.
+        // Interface share of the next step's contacts (detected, and their local problems
+        // built, for this: a step with `[ddm]` builds them in its subdomains' buckets).
         let interface_fraction = match &ddm {
             Some(d) => {
+                w.detect();
                 let p = w.partition(d);
                 let n = w.local_problems().len().max(1) as f64;
                 DdmProblem::build(&p, w.local_problems(), d.parallel_interface).interface_len()

@@ -17,7 +17,7 @@ use crate::detection::{Detector, RawContact};
 use crate::laws::{default_overlap_cap, driven_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
-use crate::solver::delassus::build_local_problems;
+use crate::solver::delassus::LocalBuilder;
 use crate::solver::partition::SortedAxes;
 use crate::solver::Exchange;
 use crate::solver::{
@@ -617,6 +617,12 @@ impl World {
     /// Steps 1–3 up to the local problems: detection at `qᵢ` with warm start, free velocities,
     /// local problems. Returns the largest overlap and the phase times so far.
     pub fn prepare(&mut self) -> (f64, PhaseTimes) {
+        self.prepare_with(true)
+    }
+
+    /// [`World::prepare`]; without `build`, the local problems are left to the solver, which
+    /// builds them straight into its subdomains' buckets ([`World::step`] with `[ddm]`).
+    fn prepare_with(&mut self, build: bool) -> (f64, PhaseTimes) {
         if self.origin.is_none() && self.step_index == 0 {
             self.origin = Some(initial_state_digest(&self.bodies));
         }
@@ -645,6 +651,7 @@ impl World {
             &self.friction,
             &self.scratch.previous,
             s.match_fraction,
+            self.detector.radii(),
         );
         let max_penetration = self.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g));
         times.detection = lap.lap();
@@ -724,24 +731,41 @@ impl World {
         // 3. Local problems.
         // Without warm start the solver starts from zero impulses; the previous ones stay the
         // compliant law's memory.
-        build_local_problems(
-            &self.contacts,
-            self.settings.solver.warm_start,
-            b,
-            &self.scratch.solver_bodies,
-            &self.scratch.attach,
-            self.overlap_law(),
-            &mut self.scratch.locals,
-        );
+        if build {
+            let mut locals = std::mem::take(&mut self.scratch.locals);
+            self.local_builder().build_all(&mut locals);
+            self.scratch.locals = locals;
+        } else {
+            // Nothing stale for `local_problems` to show.
+            self.scratch.locals.clear();
+        }
         times.nlgs += lap.lap();
         (max_penetration, times)
     }
 
+    /// What this step's local problems are built from (after detection and the free
+    /// velocities).
+    fn local_builder(&self) -> LocalBuilder<'_> {
+        LocalBuilder {
+            contacts: &self.contacts,
+            warm_start: self.settings.solver.warm_start,
+            bodies: &self.bodies,
+            solver_bodies: &self.scratch.solver_bodies,
+            attach: &self.scratch.attach,
+            overlap_law: self.overlap_law(),
+        }
+    }
+
     /// Advances one time step.
     pub fn step(&mut self) -> StepReport {
-        let (max_penetration, mut times) = match self.scratch.pending.take() {
-            Some(p) => p,
-            None => self.prepare(),
+        // A step [`World::detect`] prepared has its local problems; otherwise the domain
+        // decomposition builds them in its buckets (one copy of them fewer).
+        let (built, (max_penetration, mut times)) = match self.scratch.pending.take() {
+            Some(p) => (true, p),
+            None => {
+                let build = self.settings.ddm.is_none();
+                (build, self.prepare_with(build))
+            }
         };
         let deepest = self
             .contacts
@@ -786,20 +810,36 @@ impl World {
                 let partition = self.partition_from(d, &mut sorted);
                 self.scratch.sorted_axes = sorted;
                 self.scratch.ddm_workspace.exchange = self.exchange.clone();
-                let (report, t, corrected) = ddm::solve_and_correct(
-                    &mut self.scratch.ddm_workspace,
+                if !built {
+                    let mut ws = std::mem::take(&mut self.scratch.ddm_workspace);
+                    ws.bucket(&partition, &self.local_builder(), d.parallel_interface);
+                    self.scratch.ddm_workspace = ws;
+                }
+                let (sc, cs) = (&mut self.scratch, &mut self.contacts);
+                let contacts = if built {
+                    ddm::Contacts::Built {
+                        locals: &mut sc.locals,
+                        status: &mut cs.status,
+                    }
+                } else {
+                    ddm::Contacts::Bucketed {
+                        impulse: &mut cs.impulse,
+                        status: &mut cs.status,
+                    }
+                };
+                let (report, t, corrected) = ddm::solve_contacts(
+                    &mut sc.ddm_workspace,
                     &nlgs,
                     d,
                     &partition,
-                    &mut self.scratch.locals,
+                    contacts,
                     &mut self.drives,
-                    &mut self.scratch.solver_bodies,
-                    &mut self.contacts.status,
+                    &mut sc.solver_bodies,
                     Some(ddm::CorrectionPass {
                         settings: &s.correction,
                         h,
                         elastic,
-                        pseudo: &mut self.scratch.pseudo,
+                        pseudo: &mut sc.pseudo,
                     }),
                 );
                 times.subdomains = t.subdomains;
@@ -808,12 +848,14 @@ impl World {
                 (report, corrected)
             }
         };
-        self.contacts
-            .impulse
-            .par_iter_mut()
-            .with_min_len(4096)
-            .zip(self.scratch.locals.par_iter())
-            .for_each(|(r, c)| *r = c.r);
+        if built {
+            self.contacts
+                .impulse
+                .par_iter_mut()
+                .with_min_len(4096)
+                .zip(self.scratch.locals.par_iter())
+                .for_each(|(r, c)| *r = c.r);
+        }
         // A driven body moves as its drive says: the position-only overlap correction pushes
         // the grains off it, not it off the grains.
         if corrected {

@@ -190,6 +190,41 @@ fn ddm_is_independent_of_the_thread_count() {
     }
 }
 
+/// A step builds its local problems straight into the subdomains' buckets; a step prepared by
+/// `detect` (its local problems readable in the contacts' order) buckets copies of them. Both
+/// give the same run, bit for bit.
+#[test]
+fn local_problems_built_in_buckets_equal_copies_in_contact_order() {
+    let run = |detect_first: bool| {
+        let mut sc = pile(120, [0.025, 0.05], 5, 0);
+        sc.ddm = Some(DdmSettings {
+            subdomains: [3, 2, 1],
+            min_parallel_contacts: 0,
+            ..Default::default()
+        });
+        let mut w = sc.build().unwrap();
+        for _ in 0..1200 {
+            if detect_first {
+                w.detect();
+                assert_eq!(w.local_problems().len(), w.contacts.len());
+            }
+            w.step();
+        }
+        assert!(w.contacts.len() > 100);
+        let impulses: Vec<[u64; 3]> = w
+            .contacts
+            .impulse
+            .iter()
+            .map(|r| r.to_array().map(f64::to_bits))
+            .collect();
+        (state_digest(&w.bodies), impulses, w.contacts.status.clone())
+    };
+    let (direct, copied) = (run(false), run(true));
+    assert_eq!(direct.0, copied.0, "bodies differ");
+    assert_eq!(direct.1, copied.1, "impulses differ");
+    assert_eq!(direct.2, copied.2, "statuses differ");
+}
+
 /// Converged DDM and converged monolithic NLGS agree within the tolerance on a settled pile.
 #[test]
 fn converged_ddm_agrees_with_monolithic() {

@@ -6,7 +6,6 @@ use crate::bodies::BodySet;
 use crate::detection::RawContact;
 use crate::laws::{ContactStatus, FrictionTable};
 use crate::math::{frame_from_normal, DVec3};
-use crate::shapes::Shape;
 
 /// All contacts of a step, as a structure of arrays, sorted by body pair.
 #[derive(Clone, Debug, Default)]
@@ -78,7 +77,8 @@ impl ContactSet {
 
     /// Rebuilds `self` from the detected points `raw` (sorted by unordered pair), taking the
     /// impulses of `previous` where a contact persists: same bodies, and a position in body 1's
-    /// frame within `match_fraction` × the smaller body radius of the old one. Each old contact
+    /// frame within `match_fraction` × the smaller body radius (`radii`, one per body, ∞ for a
+    /// half-space) of the old one. Each old contact
     /// is reused at most once, taken by the pair's points in order; the old world impulse is
     /// re-projected on the new frame.
     ///
@@ -93,6 +93,7 @@ impl ContactSet {
         friction: &FrictionTable,
         previous: &ContactSet,
         match_fraction: f64,
+        radii: &[f64],
     ) {
         use rayon::prelude::*;
         let n = raw.len();
@@ -142,7 +143,7 @@ impl ContactSet {
                     }
                     let new = first..first + out.len();
                     let (points, locals) = (&raw[new.clone()], &locals[new]);
-                    match_pair(points, locals, out, p0..p, bodies, previous, match_fraction);
+                    match_pair(points, locals, out, p0..p, radii, previous, match_fraction);
                 }
             });
         (
@@ -201,7 +202,7 @@ fn match_pair(
     locals: &[DVec3],
     out: &mut [Option<usize>],
     old: std::ops::Range<usize>,
-    bodies: &BodySet,
+    radii: &[f64],
     previous: &ContactSet,
     match_fraction: f64,
 ) {
@@ -218,7 +219,7 @@ fn match_pair(
         &mut large
     };
     let (b1, b2) = (points[0].body1 as usize, points[0].body2 as usize);
-    let tol = match_fraction * radius(bodies, b1).min(radius(bodies, b2));
+    let tol = match_fraction * radii[b1].min(radii[b2]);
     for ((c, &local), taken) in points.iter().zip(locals).zip(out) {
         let mut best: Option<(f64, usize)> = None;
         for (u, &was_used) in used.iter().enumerate() {
@@ -249,11 +250,4 @@ fn partition(set: &ContactSet, pred: impl Fn(usize) -> bool) -> usize {
         }
     }
     lo
-}
-
-fn radius(bodies: &BodySet, i: usize) -> f64 {
-    match &bodies.shape[i] {
-        Shape::Polyhedron(p) => p.radius,
-        Shape::Plane { .. } => f64::INFINITY,
-    }
 }

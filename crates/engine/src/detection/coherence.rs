@@ -24,7 +24,6 @@
 
 use crate::bodies::BodySet;
 use crate::math::{DQuat, DVec3};
-use crate::shapes::Shape;
 use rayon::prelude::*;
 
 /// Anchor poses of every body, and which were re-anchored by the last update.
@@ -45,10 +44,12 @@ pub(crate) struct Anchors {
 impl Anchors {
     /// Re-anchors the bodies that moved more than `reuse` (m) since their anchor or whose
     /// `margin` exceeds it; every body when `reuse` is 0, when `invalidate` is set, or when the
-    /// anchors do not match the body count.
+    /// anchors do not match the body count. `radii`: each body's circumradius, ∞ for a
+    /// half-space.
     pub(crate) fn update(
         &mut self,
         bodies: &BodySet,
+        radii: &[f64],
         margins: &[f64],
         reuse: f64,
         invalidate: bool,
@@ -77,13 +78,10 @@ impl Anchors {
                     return (false, true, DQuat::IDENTITY);
                 }
                 let rotation = q * qa.conjugate();
-                let far = match &bodies.shape[i] {
-                    // A half-space reaches everywhere: any motion invalidates its pairs.
-                    Shape::Plane { .. } => true,
-                    Shape::Polyhedron(p) => {
-                        let angle = 2.0 * rotation.xyz().length().min(1.0).asin();
-                        (x - xa).length() + angle * p.radius > reuse || margins[i] > reuse
-                    }
+                // A half-space reaches everywhere: any motion invalidates its pairs.
+                let far = radii[i] == f64::INFINITY || {
+                    let angle = 2.0 * rotation.xyz().length().min(1.0).asin();
+                    (x - xa).length() + angle * radii[i] > reuse || margins[i] > reuse
                 };
                 if far {
                     (true, true, DQuat::IDENTITY)

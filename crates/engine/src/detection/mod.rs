@@ -17,7 +17,7 @@ pub use narrow::{FaceHint, Manifold, ManifoldPoint, WorldPolyhedron};
 
 use crate::bodies::{BodyKind, BodySet};
 use crate::math::{DQuat, DVec3};
-use crate::shapes::Shape;
+use crate::shapes::{ConvexPolyhedron, Shape};
 use crate::slices::split_lengths;
 use crate::solver::Exchange;
 use rayon::prelude::*;
@@ -44,6 +44,10 @@ struct GeometryCache {
     normals: Vec<DVec3>,
     offsets: Vec<f64>,
     face_start: Vec<usize>,
+    /// The shapes the layout was computed for (held, so that none of them is freed and its
+    /// address reused while compared), and each body's circumradius (∞ for a half-space).
+    shapes: Vec<Option<Arc<ConvexPolyhedron>>>,
+    radii: Vec<f64>,
 }
 
 /// Contact detection with reusable buffers.
@@ -162,6 +166,11 @@ impl Detector {
         self.geometry_stale = true;
     }
 
+    /// Each body's circumradius (∞ for a half-space), as of the last detection.
+    pub(crate) fn radii(&self) -> &[f64] {
+        &self.cache.radii
+    }
+
     /// Pairs whose manifold the last detection reused, and candidate pairs in all.
     pub fn reuse_counts(&self) -> (usize, usize) {
         let reused = self.results.par_iter().filter(|r| r.reused).count();
@@ -176,6 +185,32 @@ impl Detector {
         // are then kept).
         let first = c.vertex_start.is_empty();
         let n = bodies.len();
+        // The same shapes as last time: the same layout (comparing the shared shapes' addresses
+        // reads no shape, where recounting their vertices would visit every one).
+        fn polyhedron(s: &Shape) -> Option<&Arc<ConvexPolyhedron>> {
+            match s {
+                Shape::Polyhedron(p) => Some(p),
+                Shape::Plane { .. } => None,
+            }
+        }
+        let same = |(s, held): (&Shape, &Option<Arc<ConvexPolyhedron>>)| match (polyhedron(s), held)
+        {
+            (Some(p), Some(q)) => Arc::ptr_eq(p, q),
+            (None, None) => true,
+            _ => false,
+        };
+        if !first && c.shapes.len() == n && bodies.shape.iter().zip(&c.shapes).all(same) {
+            return false;
+        }
+        c.shapes.clear();
+        c.shapes
+            .extend(bodies.shape.iter().map(|s| polyhedron(s).cloned()));
+        c.radii.clear();
+        c.radii.extend(
+            c.shapes
+                .iter()
+                .map(|p| p.as_ref().map_or(f64::INFINITY, |p| p.radius)),
+        );
         let mut changed = c.vertex_start.len() != n + 1;
         c.vertex_start.resize(n + 1, 0);
         c.face_start.resize(n + 1, 0);
@@ -266,18 +301,21 @@ impl Detector {
     ) {
         out.clear();
         let n = bodies.len();
+        let layout_changed = self.refresh_layout(bodies);
+        let radii = &self.cache.radii;
         (0..n)
             .into_par_iter()
             .with_min_len(1024)
-            .map(|i| match (&bodies.shape[i], bodies.kind[i]) {
-                (_, BodyKind::Fixed) | (Shape::Plane { .. }, _) => 0.0,
-                (Shape::Polyhedron(p), _) => {
+            .map(|i| match bodies.kind[i] {
+                // A half-space (infinite radius) never gets a margin.
+                _ if radii[i] == f64::INFINITY => 0.0,
+                BodyKind::Fixed => 0.0,
+                _ => {
                     dt * (bodies.velocity[i].length()
-                        + bodies.angular_velocity[i].length() * p.radius)
+                        + bodies.angular_velocity[i].length() * radii[i])
                 }
             })
             .collect_into_vec(&mut self.margins);
-        let layout_changed = self.refresh_layout(bodies);
         // The cached manifolds were computed with the alert distance and margins of these
         // settings; the anchors themselves stay valid whatever they are.
         let key = (alert.to_bits(), reuse.to_bits());
@@ -286,8 +324,13 @@ impl Detector {
             self.results.clear();
             self.cached_for = Some(key);
         }
-        self.anchors
-            .update(bodies, &self.margins, reuse, layout_changed);
+        self.anchors.update(
+            bodies,
+            &self.cache.radii,
+            &self.margins,
+            reuse,
+            layout_changed,
+        );
         let all = std::mem::take(&mut self.geometry_stale);
         self.refresh_geometry(bodies, all);
         let reach = |m: f64| if reuse > 0.0 { reuse + m.max(reuse) } else { m };

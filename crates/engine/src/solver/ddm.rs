@@ -24,13 +24,14 @@
 //! monolithic NLGS run in [`DdmProblem::equivalent_order`].
 
 use super::correction::{self, CorrectionSettings, Overlap};
-use super::delassus::{BodyAccess, LocalProblem, SolverBody};
+use super::delassus::{BodyAccess, LocalBuilder, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
 use super::exchange::{self, Exchange, ShareBuffers, Unit};
 use super::nlgs::{Nlgs, SolveReport, SweepSums, TermCache};
 use super::partition::{Balance, Partition, STATIC};
 use super::StopRule;
 use crate::laws::{ContactStatus, Elastic};
+use crate::math::DVec3;
 use crate::ScenarioError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -155,16 +156,9 @@ pub struct Bucket {
 }
 
 impl Bucket {
-    /// Appends the contacts `members` of `locals`, each as `renumber` gives it (one copy of
-    /// each local problem, written in place).
-    fn fill(
-        &mut self,
-        members: &[u32],
-        locals: &[LocalProblem],
-        renumber: impl Fn(&LocalProblem) -> LocalProblem,
-    ) {
-        self.locals
-            .extend(members.iter().map(|&idx| renumber(&locals[idx as usize])));
+    /// Appends the contacts `members`, each as `make` gives it (written in place).
+    fn fill(&mut self, members: &[u32], make: impl Fn(u32) -> LocalProblem) {
+        self.locals.extend(members.iter().map(|&idx| make(idx)));
         self.origin.extend_from_slice(members);
         self.status
             .resize(self.origin.len(), ContactStatus::NoContact);
@@ -238,23 +232,43 @@ impl DdmProblem {
         locals: &[LocalProblem],
         parallel_interface: bool,
     ) {
+        self.rebuild_with(
+            partition,
+            locals.len(),
+            |k| (locals[k].body1, locals[k].body2),
+            |k| locals[k],
+            parallel_interface,
+        );
+    }
+
+    /// [`DdmProblem::rebuild`] of `n` contacts that are not built yet: contact `k` joins the
+    /// bodies `bodies_of(k)`, and `make(k)` builds its local problem (the caller's numbering)
+    /// straight into its bucket, without a copy in the caller's order first.
+    pub(crate) fn rebuild_with(
+        &mut self,
+        partition: &Partition,
+        n: usize,
+        bodies_of: impl Fn(usize) -> (u32, u32) + Sync,
+        make: impl Fn(usize) -> LocalProblem + Sync,
+        parallel_interface: bool,
+    ) {
         let k = partition.count();
-        let renumber = |c: &LocalProblem| {
-            let mut l = *c;
-            l.body1 = partition.new_index[c.body1 as usize];
-            l.body2 = partition.new_index[c.body2 as usize];
+        let renumber = |idx: u32| {
+            let mut l = make(idx as usize);
+            l.body1 = partition.new_index[l.body1 as usize];
+            l.body2 = partition.new_index[l.body2 as usize];
             l
         };
-        // Each contact's subdomain (`STATIC`: Γ), read in parallel: the local problems are
-        // megabytes, their bodies' indices one line apart.
-        let subdomain = |c: &LocalProblem| {
+        // Each contact's subdomain (`STATIC`: Γ), read in parallel.
+        let subdomain = |idx: usize| {
+            let (b1, b2) = bodies_of(idx);
             (
-                partition.subdomain[c.body1 as usize],
-                partition.subdomain[c.body2 as usize],
+                partition.subdomain[b1 as usize],
+                partition.subdomain[b2 as usize],
             )
         };
-        let owners: Vec<u32> = locals
-            .par_iter()
+        let owners: Vec<u32> = (0..n)
+            .into_par_iter()
             .with_min_len(4096)
             .map(|c| match subdomain(c) {
                 (a, b) if a == b => a,
@@ -268,7 +282,7 @@ impl DdmProblem {
         self.members.resize_with(k, Vec::new);
         self.members.iter_mut().for_each(Vec::clear);
         self.slot.clear();
-        self.slot.resize(locals.len(), (0, 0));
+        self.slot.resize(n, (0, 0));
         let mut gamma: Vec<((u32, u32), u32)> = Vec::new();
         for (idx, &owner) in owners.iter().enumerate() {
             if owner != STATIC {
@@ -277,7 +291,7 @@ impl DdmProblem {
                 members.push(idx as u32);
             } else {
                 let pair = if parallel_interface {
-                    let (s1, s2) = subdomain(&locals[idx]);
+                    let (s1, s2) = subdomain(idx);
                     (s1.min(s2), s1.max(s2))
                 } else {
                     (STATIC, STATIC)
@@ -291,7 +305,7 @@ impl DdmProblem {
             .zip(self.members.par_iter())
             .for_each(|(bucket, members)| {
                 bucket.clear();
-                bucket.fill(members, locals, renumber);
+                bucket.fill(members, renumber);
             });
         // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily.
         gamma.sort_unstable();
@@ -309,7 +323,7 @@ impl DdmProblem {
                 });
             }
             let group = self.groups.last_mut().expect("pushed above");
-            group.bucket.push(renumber(&locals[idx as usize]), idx);
+            group.bucket.push(renumber(idx), idx);
         }
         // Greedy colouring, largest groups first (ties by pair): a colour lasts as long as its
         // largest group, so the large groups share the first colours instead of each
@@ -944,6 +958,66 @@ pub fn solve_and_correct(
     status: &mut [ContactStatus],
     correction: Option<CorrectionPass>,
 ) -> (SolveReport, DdmTimes, bool) {
+    solve_contacts(
+        ws,
+        nlgs,
+        ddm,
+        partition,
+        Contacts::Built { locals, status },
+        drives,
+        bodies,
+        correction,
+    )
+}
+
+/// The contacts of [`solve_contacts`]: where their local problems come from, where their
+/// impulses and statuses go.
+pub(crate) enum Contacts<'a> {
+    /// Built by the caller (its numbering); impulses and statuses written back to them.
+    Built {
+        locals: &'a mut [LocalProblem],
+        status: &'a mut [ContactStatus],
+    },
+    /// Built straight into their buckets by [`DdmWorkspace::bucket`]; impulses and statuses
+    /// written to `impulse` and `status` (one per contact).
+    Bucketed {
+        impulse: &'a mut [DVec3],
+        status: &'a mut [ContactStatus],
+    },
+}
+
+impl DdmWorkspace {
+    /// Builds the local problems of `builder`'s contacts straight into the buckets of
+    /// `partition` (no copy of them in the contacts' order first), for [`solve_contacts`]
+    /// with [`Contacts::Bucketed`].
+    pub(crate) fn bucket(
+        &mut self,
+        partition: &Partition,
+        builder: &LocalBuilder,
+        parallel_interface: bool,
+    ) {
+        self.problem.rebuild_with(
+            partition,
+            builder.contacts.len(),
+            |k| builder.bodies_of(k),
+            |k| builder.at(k),
+            parallel_interface,
+        );
+    }
+}
+
+/// [`solve_and_correct`] of [`Contacts`] built by the caller or here.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn solve_contacts(
+    ws: &mut DdmWorkspace,
+    nlgs: &Nlgs,
+    ddm: &DdmSettings,
+    partition: &Partition,
+    contacts: Contacts,
+    drives: &mut [DriveRows],
+    bodies: &mut [SolverBody],
+    correction: Option<CorrectionPass>,
+) -> (SolveReport, DdmTimes, bool) {
     let mut times = DdmTimes::default();
     let min_parallel = ddm.min_parallel_contacts * 2 / rayon::current_num_threads().max(2);
     let DdmWorkspace {
@@ -956,14 +1030,23 @@ pub fn solve_and_correct(
     } = ws;
     pb.clear();
     pb.par_extend(partition.order.par_iter().map(|&i| bodies[i as usize]));
-    p.rebuild(partition, locals, ddm.parallel_interface);
+    let n = match &contacts {
+        Contacts::Built { locals, .. } => {
+            p.rebuild(partition, locals, ddm.parallel_interface);
+            locals.len()
+        }
+        Contacts::Bucketed { impulse, status } => {
+            assert!(p.slot.len() == impulse.len() && status.len() == impulse.len());
+            impulse.len()
+        }
+    };
     let starts = &partition.starts;
     let mut report = SolveReport::default();
 
     // 1. Residual scale (terms in parallel, summed in the equivalent order), then warm start.
     let buckets: Vec<&Bucket> = p.buckets().collect();
     terms.clear();
-    terms.resize(locals.len(), 0.0);
+    terms.resize(n, 0.0);
     {
         let (chunks, _) =
             crate::slices::split_lengths(terms.as_mut_slice(), buckets.iter().map(|b| b.len()));
@@ -1017,7 +1100,7 @@ pub fn solve_and_correct(
 
     // 2. DDM iterations.
     let s = &nlgs.settings;
-    let total_rows = locals.len() + dr.len();
+    let total_rows = n + dr.len();
     let mut stop = StopRule::new();
     if total_rows == 0 {
         report.converged = true;
@@ -1119,16 +1202,28 @@ pub fn solve_and_correct(
         .zip(new_index.par_iter())
         .for_each(|(b, &k)| *b = pb_ref[k as usize]);
     let buckets: Vec<&Bucket> = p.buckets().collect();
-    locals
-        .par_iter_mut()
-        .with_min_len(1024)
-        .zip(status.par_iter_mut())
-        .zip(p.slot.par_iter())
-        .for_each(|((c, st), &(bi, k))| {
-            let b = buckets[bi as usize];
-            c.r = b.locals[k as usize].r;
-            *st = b.status[k as usize];
-        });
+    let (impulses, status) = match contacts {
+        Contacts::Built { locals, status } => (Impulses::Locals(locals), status),
+        Contacts::Bucketed { impulse, status } => (Impulses::Direct(impulse), status),
+    };
+    let solved = |(st, &(bi, k)): (&mut ContactStatus, &(u32, u32))| {
+        let b = buckets[bi as usize];
+        *st = b.status[k as usize];
+        b.locals[k as usize].r
+    };
+    let (status, slot) = (status.par_iter_mut(), p.slot.par_iter());
+    match impulses {
+        Impulses::Locals(locals) => locals
+            .par_iter_mut()
+            .with_min_len(1024)
+            .zip(status.zip(slot))
+            .for_each(|(c, x)| c.r = solved(x)),
+        Impulses::Direct(impulse) => impulse
+            .par_iter_mut()
+            .with_min_len(1024)
+            .zip(status.zip(slot))
+            .for_each(|(r, x)| *r = solved(x)),
+    }
     drop(buckets);
 
     // 4. Overlap correction on the same split.
@@ -1149,6 +1244,12 @@ pub fn solve_and_correct(
         times.communication = r.seconds;
     }
     (report, times, corrected)
+}
+
+/// Where [`solve_contacts`] writes the impulses back.
+enum Impulses<'a> {
+    Locals(&'a mut [LocalProblem]),
+    Direct(&'a mut [DVec3]),
 }
 
 /// The pseudo-velocity sweeps of the overlap correction, on the subdomains in parallel then

@@ -217,76 +217,96 @@ pub(crate) fn delassus_block(
     basis.transpose() * world * basis
 }
 
-/// Builds the local problem of every contact (in parallel; the order is the contacts' order),
-/// starting from the contacts' impulses with `warm_start`, else from zero. `attach[i]` is the
-/// body whose velocities body `i` takes (itself, or the body it is a rigid part of; empty:
-/// every body is itself): a contact on an attached part acts on that body, with the lever arm
-/// from its centre of mass. `overlap_law`: the elastic law and the overlap caps of
-/// [`crate::laws::NormalLaw::Overlap`] (the compliant law starts from the force the capped
+/// What a contact's local problem is built from: the contacts, the bodies and their solver
+/// view. `attach[i]` is the body whose velocities body `i` takes (itself, or the body it is a
+/// rigid part of; empty: every body is itself): a contact on an attached part acts on that
+/// body, with the lever arm from its centre of mass. With `warm_start` a problem starts from
+/// its contact's impulse, else from zero. `overlap_law`: the elastic law and the overlap caps
+/// of [`crate::laws::NormalLaw::Overlap`] (the compliant law starts from the force the capped
 /// overlap holds), between two dynamic bodies and with a body that is not dynamic (see
 /// [`crate::laws::driven_overlap_cap`]); `None` for the rate form (from the force the contact
 /// carried).
-pub(crate) fn build_local_problems(
-    contacts: &ContactSet,
-    warm_start: bool,
-    bodies: &BodySet,
-    solver_bodies: &[SolverBody],
-    attach: &[u32],
-    overlap_law: Option<(Elastic, [f64; 2])>,
-    out: &mut Vec<LocalProblem>,
-) {
-    use rayon::prelude::*;
-    out.clear();
-    (0..contacts.len())
-        .into_par_iter()
-        .with_min_len(256)
-        .map(|k| {
-            let (mut b1, mut b2) = (contacts.body1[k] as usize, contacts.body2[k] as usize);
-            if !attach.is_empty() {
-                (b1, b2) = (attach[b1] as usize, attach[b2] as usize);
-            }
-            // The frame as the sweep rebuilds it from `[n, t]`.
-            let [n, t, _] = contacts.frame[k];
-            let e = [n, t, n.cross(t)];
-            let x = contacts.point[k];
-            let (r1, r2) = (x - bodies.position[b1], x - bodies.position[b2]);
-            let w = Sym3::from_mat(delassus_block(
-                &e,
-                r1,
-                r2,
-                &solver_bodies[b1],
-                &solver_bodies[b2],
-            ));
-            LocalProblem {
-                body1: b1 as u32,
-                body2: b2 as u32,
-                dynamic1: solver_bodies[b1].writable(),
-                dynamic2: solver_bodies[b2].writable(),
-                frame: [n, t],
-                r1,
-                r2,
-                w,
-                gap: contacts.gap[k],
-                mu: contacts.mu[k],
-                r: if warm_start {
-                    contacts.impulse[k]
-                } else {
-                    DVec3::ZERO
-                },
-                // The compliant law's starting force: remembered, or held by the overlap.
-                r_prev: match overlap_law {
-                    Some((e, [cap, driven])) => {
-                        let dynamic = |b: u32| bodies.kind[b as usize] == BodyKind::Dynamic;
-                        let both = dynamic(contacts.body1[k]) && dynamic(contacts.body2[k]);
-                        e.impulse_at((-contacts.gap[k]).min(if both { cap } else { driven }))
-                    }
-                    None => contacts.impulse[k].x,
-                },
-                rt_prev: [contacts.impulse[k].y as f32, contacts.impulse[k].z as f32],
-                seen: [u16::MAX; 2],
-            }
-        })
-        .collect_into_vec(out);
+#[derive(Clone, Copy)]
+pub(crate) struct LocalBuilder<'a> {
+    pub contacts: &'a ContactSet,
+    pub warm_start: bool,
+    pub bodies: &'a BodySet,
+    pub solver_bodies: &'a [SolverBody],
+    pub attach: &'a [u32],
+    pub overlap_law: Option<(Elastic, [f64; 2])>,
+}
+
+impl LocalBuilder<'_> {
+    /// The two bodies contact `k`'s problem acts on.
+    #[inline]
+    pub fn bodies_of(&self, k: usize) -> (u32, u32) {
+        let (b1, b2) = (self.contacts.body1[k], self.contacts.body2[k]);
+        if self.attach.is_empty() {
+            (b1, b2)
+        } else {
+            (self.attach[b1 as usize], self.attach[b2 as usize])
+        }
+    }
+
+    /// Contact `k`'s local problem, bodies in the caller's numbering.
+    #[inline]
+    pub fn at(&self, k: usize) -> LocalProblem {
+        let (contacts, bodies, solver_bodies) = (self.contacts, self.bodies, self.solver_bodies);
+        let (b1, b2) = self.bodies_of(k);
+        let (b1, b2) = (b1 as usize, b2 as usize);
+        // The frame as the sweep rebuilds it from `[n, t]`.
+        let [n, t, _] = contacts.frame[k];
+        let e = [n, t, n.cross(t)];
+        let x = contacts.point[k];
+        let (r1, r2) = (x - bodies.position[b1], x - bodies.position[b2]);
+        let w = Sym3::from_mat(delassus_block(
+            &e,
+            r1,
+            r2,
+            &solver_bodies[b1],
+            &solver_bodies[b2],
+        ));
+        LocalProblem {
+            body1: b1 as u32,
+            body2: b2 as u32,
+            dynamic1: solver_bodies[b1].writable(),
+            dynamic2: solver_bodies[b2].writable(),
+            frame: [n, t],
+            r1,
+            r2,
+            w,
+            gap: contacts.gap[k],
+            mu: contacts.mu[k],
+            r: if self.warm_start {
+                contacts.impulse[k]
+            } else {
+                DVec3::ZERO
+            },
+            // The compliant law's starting force: remembered, or held by the overlap.
+            r_prev: match self.overlap_law {
+                Some((e, [cap, driven])) => {
+                    let dynamic = |b: u32| bodies.kind[b as usize] == BodyKind::Dynamic;
+                    let both = dynamic(contacts.body1[k]) && dynamic(contacts.body2[k]);
+                    e.impulse_at((-contacts.gap[k]).min(if both { cap } else { driven }))
+                }
+                None => contacts.impulse[k].x,
+            },
+            rt_prev: [contacts.impulse[k].y as f32, contacts.impulse[k].z as f32],
+            seen: [u16::MAX; 2],
+        }
+    }
+
+    /// Builds the local problem of every contact into `out` (in parallel; the order is the
+    /// contacts' order).
+    pub fn build_all(&self, out: &mut Vec<LocalProblem>) {
+        use rayon::prelude::*;
+        out.clear();
+        (0..self.contacts.len())
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|k| self.at(k))
+            .collect_into_vec(out);
+    }
 }
 
 /// For unit tests: a contact between bodies `a` and `b` on the line of their centres along
