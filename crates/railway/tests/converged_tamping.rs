@@ -1,9 +1,9 @@
 //! The tamping cycle of `examples/python/small_track.toml` (about 750 grains, one 0.10 m block,
-//! the whole 0.51 s cycle at dt = 1e-4 s with contacts of 1e7 N/m per point normally and 5e6
-//! tangentially, and ≤ 400 sweeps) on the bed's five grain packs (`[ballast] seed` 3–7):
-//! the settings that make NLGS converge through the insertion and the squeeze, held to the
-//! quality they were measured at (BENCHMARKS.md, sessions 13, 19 and 27), with the machine's
-//! limits, the compaction under the block and the released block's level.
+//! the whole 0.51 s cycle) with the default job's contact law and solver (dt = 1e-4 s, springs
+//! of 1e6 N/m per point with the hyperbolic closure and the overlap law, a natural-map residual
+//! of 1e-3 within 300 sweeps) on the bed's five grain packs (`[ballast] seed` 3–7): the CI-sized
+//! run of issue 15, held to the default job's bounds (steps unconverged, overlaps), with the
+//! machine's limits, the compaction under the block and the released block's level.
 //!
 //! Under the 0.10 × 0.18 m block the 5 cm control volume holds one layer of 31.5/50 grains, so
 //! whether one pack compacts depends on where a few grains sit: the compaction is asserted on
@@ -99,9 +99,13 @@ fn cycle(mut s: TrackScenario, seed: u64) -> Cycle {
 fn the_small_track_cycle_converges_and_compacts_under_the_block() {
     let path =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../examples/python/small_track.toml");
-    let s = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
-    assert_eq!(s.simulation.contact_stiffness, Some(1e7));
-    assert_eq!(s.simulation.tangential_stiffness, Some(5e6));
+    let mut s = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+    // The file keeps the stiff linear springs it was first measured with; the default job's
+    // law and solver replace them here.
+    let default = TrackScenario::default_preset();
+    (s.simulation, s.solver) = (default.simulation, default.solver);
+    assert_eq!(s.simulation.contact_stiffness, Some(1e6));
+    assert_eq!(s.simulation.dt, 1e-4);
     let lift = s.tamping.lift;
     // The packs run side by side (each run's own result does not depend on it).
     let cycles: Vec<Cycle> = std::thread::scope(|scope| {
@@ -113,22 +117,22 @@ fn the_small_track_cycle_converges_and_compacts_under_the_block() {
             .collect();
         runs.into_iter().map(|r| r.join().unwrap()).collect()
     });
-    // Measured (with `solver.skip = 1`), packs 3–7: 81–191 of 5,100 steps unconverged
-    // (1.6–3.7 %), largest residuals 0.043–0.39 (one step of the lift, 0.39, in pack 7; before
-    // the edge contacts lying across a face got both their ends, 0.033–0.086, which is why the
-    // bound is 0.5 rather than 0.25), largest overlaps 1.17–1.51 mm; compacity under the block
-    // −1.6 %, +3.0 %, +11.3 %, +12.7 %, +5.2 % (mean +6.1 %), the cribs loosening by
-    // 0.7–9.9 % (mean −4.9 %); the block, let down over 0.03 s and settled for 0.07 s more,
-    // −1.7, +5.4, +4.6, +9.2, +3.2 mm from its level before the 10 mm lift (it fell through the
-    // gap the tines left under it). Let go at once, it was launched (pack 4: +9.7 → +13.2 →
-    // +9.7 mm within the 0.06 s it then had), which is why the bound above was lift + 1 mm
-    // then and is the lift now.
+    // Measured, packs 3–7: 0, 1, 0, 7, 12 of 5,100 steps unconverged (at most 0.24 %, the
+    // default job's bound is 1 %), largest residuals 0.001–0.165, largest overlaps 0.95, 0.90,
+    // 0.98, 0.93, 0.89 mm (the closure law holds a contact's deflection to 0.75 mm); compacity
+    // under the block +11.4, +3.6, +4.1, +16.4, +13.9 % (mean +9.9 %), the cribs loosening by
+    // 2.2–10.3 % (mean −4.5 %); the block, let down over 0.03 s and settled for 0.07 s more,
+    // −0.6, +7.6, +4.1, +8.7, +4.1 mm from its level before the 10 mm lift (it falls through
+    // the gap the tines left under it). With the file's stiff linear springs (1e7 N/m, rate
+    // form) the same packs left 1.6–3.7 % of their steps unconverged and overlaps of 1.17–1.51
+    // mm (BENCHMARKS.md, sessions 27 and 37).
     // Granular flow is chaotic, and a change that only reorders rounding moves such figures by
-    // tens of percent: the bounds leave that margin.
+    // tens of percent: the bounds on the residual and the compaction leave that margin; the
+    // overlap bound is the project's (1 mm), which the closure law is built to keep.
     for c in &cycles {
-        assert!(c.unconverged * 100 <= 7 * c.steps, "pack {}: {c:?}", c.seed);
+        assert!(c.unconverged * 100 <= c.steps, "pack {}: {c:?}", c.seed);
         assert!(c.worst_residual <= 0.5, "pack {}: {c:?}", c.seed);
-        assert!(c.deepest <= 2e-3, "pack {}: {c:?}", c.seed);
+        assert!(c.deepest <= 1e-3, "pack {}: {c:?}", c.seed);
         // Let down, the block rests on the tamped ballast: not sunk below its level before
         // the lift by more than a few millimetres, nor above the lift.
         assert!(
