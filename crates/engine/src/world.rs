@@ -525,7 +525,9 @@ impl World {
         self.detector.reuse_counts()
     }
 
-    /// The local problems of the step being prepared (after [`World::prepare`]).
+    /// The local problems of the step being prepared (after [`World::prepare`] or
+    /// [`World::detect`]), in the contacts' order. Empty after a step with `[ddm]` that was not
+    /// prepared so: its solver built them straight into its subdomains' buckets.
     pub fn local_problems(&self) -> &[LocalProblem] {
         &self.scratch.locals
     }
