@@ -306,11 +306,11 @@ impl Detector {
         (0..n)
             .into_par_iter()
             .with_min_len(1024)
-            .map(|i| match bodies.kind[i] {
-                // A half-space (infinite radius) never gets a margin.
-                _ if radii[i] == f64::INFINITY => 0.0,
-                BodyKind::Fixed => 0.0,
-                _ => {
+            .map(|i| {
+                // Fixed bodies and half-spaces (infinite radius) get no margin.
+                if bodies.kind[i] == BodyKind::Fixed || radii[i] == f64::INFINITY {
+                    0.0
+                } else {
                     dt * (bodies.velocity[i].length()
                         + bodies.angular_velocity[i].length() * radii[i])
                 }

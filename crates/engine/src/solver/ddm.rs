@@ -1202,26 +1202,22 @@ pub(crate) fn solve_contacts(
         .zip(new_index.par_iter())
         .for_each(|(b, &k)| *b = pb_ref[k as usize]);
     let buckets: Vec<&Bucket> = p.buckets().collect();
-    let (impulses, status) = match contacts {
-        Contacts::Built { locals, status } => (Impulses::Locals(locals), status),
-        Contacts::Bucketed { impulse, status } => (Impulses::Direct(impulse), status),
-    };
     let solved = |(st, &(bi, k)): (&mut ContactStatus, &(u32, u32))| {
         let b = buckets[bi as usize];
         *st = b.status[k as usize];
         b.locals[k as usize].r
     };
-    let (status, slot) = (status.par_iter_mut(), p.slot.par_iter());
-    match impulses {
-        Impulses::Locals(locals) => locals
+    let slot = p.slot.par_iter();
+    match contacts {
+        Contacts::Built { locals, status } => locals
             .par_iter_mut()
             .with_min_len(1024)
-            .zip(status.zip(slot))
+            .zip(status.par_iter_mut().zip(slot))
             .for_each(|(c, x)| c.r = solved(x)),
-        Impulses::Direct(impulse) => impulse
+        Contacts::Bucketed { impulse, status } => impulse
             .par_iter_mut()
             .with_min_len(1024)
-            .zip(status.zip(slot))
+            .zip(status.par_iter_mut().zip(slot))
             .for_each(|(r, x)| *r = solved(x)),
     }
     drop(buckets);
@@ -1244,12 +1240,6 @@ pub(crate) fn solve_contacts(
         times.communication = r.seconds;
     }
     (report, times, corrected)
-}
-
-/// Where [`solve_contacts`] writes the impulses back.
-enum Impulses<'a> {
-    Locals(&'a mut [LocalProblem]),
-    Direct(&'a mut [DVec3]),
 }
 
 /// The pseudo-velocity sweeps of the overlap correction, on the subdomains in parallel then
