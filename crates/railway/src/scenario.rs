@@ -934,6 +934,38 @@ mod tests {
         assert_eq!(file, paper);
     }
 
+    /// The converged paper example: the paper preset's bed, block and decomposition, with
+    /// the default job's contact law, step and solver (and so the preset's cache entry).
+    #[test]
+    fn paper_converged_example_is_the_paper_case_on_the_default_law() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../examples/paper_converged.toml"
+        );
+        let file = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let (paper, default) = (
+            TrackScenario::paper_preset(),
+            TrackScenario::default_preset(),
+        );
+        assert_eq!(file.track, paper.track);
+        assert_eq!(file.preparation, paper.preparation);
+        assert_eq!(file.tamping, paper.tamping);
+        assert_eq!(file.ddm, paper.ddm);
+        assert_eq!(file.solver, default.solver);
+        let mut sim = default.simulation.clone();
+        (
+            sim.output_interval,
+            sim.vtk_interval,
+            sim.checkpoint_interval,
+        ) = (
+            file.simulation.output_interval,
+            file.simulation.vtk_interval,
+            file.simulation.checkpoint_interval,
+        );
+        assert_eq!(file.simulation, sim);
+        assert_eq!(file.steps(), default.steps());
+    }
+
     /// The long-track example: the paper's bed made 15 blocks long (same spacing, width,
     /// depth, tiled preparation), the default job's contact law and step, one slab per block.
     #[test]

@@ -102,8 +102,9 @@ impl Elastic {
     /// the deflection `r̄ₙ/(k h f)`.
     #[inline(always)]
     pub fn stiffening(&self, r_prev: f64) -> f64 {
-        if self.closure_impulse > 0.0 {
-            1.0 + r_prev.max(0.0) / self.closure_impulse
+        // Unloaded: 1 without a division (exactly what `1 + 0 / (k h V_m)` rounds to).
+        if self.closure_impulse > 0.0 && r_prev > 0.0 {
+            1.0 + r_prev / self.closure_impulse
         } else {
             1.0
         }

@@ -395,9 +395,9 @@ impl SlideProblem {
     }
 
     /// Step 2: Newton on g(θ) along the tangent. `Some((c, s))` when it converged to an
-    /// admissible root.
-    fn correct(&self, mut c: f64, mut s: f64, tol: f64) -> Option<(f64, f64)> {
-        let noise = NEWTON_NOISE * self.scale();
+    /// admissible root. `tol` and `noise` are [`ROUNDING`] and [`NEWTON_NOISE`] times
+    /// [`Self::scale`] (computed once per solve: a slide may take several starts).
+    fn correct(&self, mut c: f64, mut s: f64, tol: f64, noise: f64) -> Option<(f64, f64)> {
         for _ in 0..MAX_NEWTON {
             let e = self.eval(c, s);
             if e.g.abs() <= noise {
@@ -576,25 +576,25 @@ fn solve_slide(
         return (project_on_cone(r_stick, mu), ContactStatus::Slide);
     }
     let scale = pb.scale();
-    let tol = ROUNDING * scale;
+    let (tol, noise) = (ROUNDING * scale, NEWTON_NOISE * scale);
     // Warm start: the previous sliding direction (its impulse on the cone's boundary).
     let pt2 = previous.y * previous.y + previous.z * previous.z;
     let bound = mu * previous.x;
     if previous.x > 0.0 && pt2 >= bound * bound * (1.0 - 1e-9) {
         let d = unit_or(previous.y, previous.z, (1.0, 0.0));
-        if let Some((c, s)) = pb.correct(d.0, d.1, tol) {
+        if let Some((c, s)) = pb.correct(d.0, d.1, tol, noise) {
             return (pb.impulse(c, s), ContactStatus::Slide);
         }
     }
     let hint = unit_or(r_stick.y, r_stick.z, (1.0, 0.0));
     let (c0, s0) = pb.predict(hint);
-    if let Some((c, s)) = pb.correct(c0, s0, tol) {
+    if let Some((c, s)) = pb.correct(c0, s0, tol, noise) {
         return (pb.impulse(c, s), ContactStatus::Slide);
     }
     // Just outside the stick cone the sliding root lies next to the stick direction, with an
     // inadmissible root close by that Newton from the prediction may reach first.
     if hint.0 * c0 + hint.1 * s0 < 1.0 - 1e-12 {
-        if let Some((c, s)) = pb.correct(hint.0, hint.1, tol) {
+        if let Some((c, s)) = pb.correct(hint.0, hint.1, tol, noise) {
             return (pb.impulse(c, s), ContactStatus::Slide);
         }
     }
@@ -605,7 +605,7 @@ fn solve_slide(
     for &theta in &roots[..n] {
         let (s, c) = theta.sin_cos();
         // Polish (matters for roots left unresolved at the subdivision's finest width).
-        let (c, s) = pb.correct(c, s, tol).unwrap_or((c, s));
+        let (c, s) = pb.correct(c, s, tol, noise).unwrap_or((c, s));
         let e = pb.eval(c, s);
         if pb.admissible(&e, tol) && e.g.abs() <= ROOT_TOL * scale {
             let closeness = c * c0 + s * s0;
