@@ -934,15 +934,17 @@ mod tests {
         assert_eq!(file, paper);
     }
 
+    /// The track scenario of `examples/NAME`.
+    fn example(name: &str) -> TrackScenario {
+        let path = format!("{}/../../examples/{name}", env!("CARGO_MANIFEST_DIR"));
+        TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap()
+    }
+
     /// The converged paper example: the paper preset's bed, block and decomposition, with
     /// the default job's contact law, step and solver (and so the preset's cache entry).
     #[test]
     fn paper_converged_example_is_the_paper_case_on_the_default_law() {
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../examples/paper_converged.toml"
-        );
-        let file = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let file = example("paper_converged.toml");
         let (paper, default) = (
             TrackScenario::paper_preset(),
             TrackScenario::default_preset(),
@@ -970,11 +972,7 @@ mod tests {
     /// depth, tiled preparation), the default job's contact law and step, one slab per block.
     #[test]
     fn long_track_example_is_the_paper_bed_made_longer() {
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../../examples/long_track.toml"
-        );
-        let file = TrackScenario::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap();
+        let file = example("long_track.toml");
         let (paper, default) = (
             TrackScenario::paper_preset(),
             TrackScenario::default_preset(),
