@@ -924,9 +924,7 @@ mod tests {
     /// (same bed, so the same cache entry).
     #[test]
     fn paper_740_example_is_the_paper_preset() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/paper_740.toml");
-        let text = std::fs::read_to_string(path).unwrap();
-        let file = TrackScenario::from_toml(&text).unwrap();
+        let file = example("paper_740.toml");
         let mut paper = TrackScenario::paper_preset();
         assert_eq!(file.solver.max_iterations, 740);
         assert!(file.solver.tolerance < 1e-20);
