@@ -532,6 +532,12 @@ impl World {
         &self.scratch.locals
     }
 
+    /// The local problems the domain-decomposed solver built in the last step (see
+    /// [`crate::solver::ddm::DdmWorkspace::local_problems`]): over K ranks, this rank's share.
+    pub fn ddm_local_problems(&self) -> usize {
+        self.scratch.ddm_workspace.local_problems()
+    }
+
     /// The solver bodies (free velocities after [`World::prepare`]).
     pub fn solver_bodies(&self) -> &[SolverBody] {
         &self.scratch.solver_bodies

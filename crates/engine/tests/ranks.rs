@@ -47,8 +47,12 @@ fn trace(w: &mut World, steps: usize) -> (Trace, f64) {
     (t, w.timers.communication)
 }
 
-/// Runs `make()`'s scene on `k` in-process ranks; every rank's trace.
-fn on_ranks(k: usize, steps: usize, make: fn() -> World) -> Vec<(Trace, f64)> {
+/// Runs `make()`'s scene on `k` in-process ranks; what `run` returns on each rank.
+fn with_ranks<T: Send + 'static>(
+    k: usize,
+    make: fn() -> World,
+    run: impl Fn(&mut World) -> T + Send + Copy + 'static,
+) -> Vec<T> {
     let handles: Vec<_> = ThreadRanks::group(k)
         .into_iter()
         .map(|r| {
@@ -56,11 +60,16 @@ fn on_ranks(k: usize, steps: usize, make: fn() -> World) -> Vec<(Trace, f64)> {
                 let mut w = make();
                 let ex: Arc<dyn Exchange> = Arc::new(r);
                 w.set_exchange(Some(ex));
-                trace(&mut w, steps)
+                run(&mut w)
             })
         })
         .collect();
     handles.into_iter().map(|h| h.join().unwrap()).collect()
+}
+
+/// Runs `make()`'s scene on `k` in-process ranks; every rank's trace.
+fn on_ranks(k: usize, steps: usize, make: fn() -> World) -> Vec<(Trace, f64)> {
+    with_ranks(k, make, move |w| trace(w, steps))
 }
 
 fn assert_same(label: &str, make: fn() -> World, steps: usize, ranks: &[usize]) {
@@ -127,4 +136,41 @@ fn one_interface_group_on_ranks_is_bit_identical() {
         600,
         &[2],
     );
+}
+
+/// Each rank builds the local problems of the subdomains and interface groups it owns and no
+/// others: over K ranks they add up to one process's, every contact's once, and no rank holds
+/// them all.
+#[test]
+fn each_rank_builds_only_its_own_local_problems() {
+    let make = || pile([2, 2, 1], true, false);
+    let steps = 600;
+    let mut alone = make();
+    for _ in 0..steps {
+        alone.step();
+    }
+    let all = alone.ddm_local_problems();
+    assert!(all > 20, "{all} local problems: too few to split");
+    assert_eq!(
+        all,
+        alone.contacts.len(),
+        "one process builds every contact's"
+    );
+    for k in [2, 3] {
+        let held = with_ranks(k, make, move |w| {
+            for _ in 0..steps {
+                w.step();
+            }
+            (w.ddm_local_problems(), w.contacts.len())
+        });
+        for (rank, &(mine, contacts)) in held.iter().enumerate() {
+            assert_eq!(contacts, all, "{k} ranks, rank {rank}: the same contacts");
+            assert!(
+                mine > 0 && mine < all,
+                "{k} ranks, rank {rank}: {mine} of {all} local problems"
+            );
+        }
+        let sum: usize = held.iter().map(|h| h.0).sum();
+        assert_eq!(sum, all, "{k} ranks: {held:?}");
+    }
 }

@@ -141,8 +141,13 @@ pub struct DdmTimes {
 
 /// Contacts solved together (a subdomain's, or an interface group's), bodies in solver
 /// numbering.
+///
+/// In a solve distributed over ranks, a bucket another rank owns is *remote*: its local
+/// problems are not built here (`locals` stays empty; `origin` and `status` list its
+/// contacts), and its impulses arrive from the owner at the end of the solve.
 #[derive(Clone, Debug, Default)]
 pub struct Bucket {
+    /// The local problems (empty when the bucket is remote).
     pub locals: Vec<LocalProblem>,
     /// Index of each contact in the caller's order.
     pub origin: Vec<u32>,
@@ -153,6 +158,10 @@ pub struct Bucket {
     terms: Vec<TermCache>,
     /// The contacts whose residual term was large at the last check (see [`hot_exceeds`]).
     hot: Vec<u32>,
+    /// Whether another rank owns this bucket (see above).
+    pub remote: bool,
+    /// A remote bucket's impulses, as its owner solved them.
+    remote_impulse: Vec<DVec3>,
 }
 
 impl Bucket {
@@ -164,8 +173,19 @@ impl Bucket {
             .resize(self.origin.len(), ContactStatus::NoContact);
     }
 
-    fn push(&mut self, l: LocalProblem, origin: u32) {
-        self.locals.push(l);
+    /// Lists the contacts `members` of a remote bucket (no local problem built).
+    fn fill_remote(&mut self, members: &[u32]) {
+        self.remote = true;
+        self.origin.extend_from_slice(members);
+        self.status
+            .resize(self.origin.len(), ContactStatus::NoContact);
+    }
+
+    /// Appends contact `origin`: its local problem `make()`, not called when remote.
+    fn push(&mut self, make: impl FnOnce() -> LocalProblem, origin: u32) {
+        if !self.remote {
+            self.locals.push(make());
+        }
         self.origin.push(origin);
         self.status.push(ContactStatus::NoContact);
     }
@@ -176,16 +196,27 @@ impl Bucket {
         self.status.clear();
         self.terms.clear();
         self.hot.clear();
+        self.remote = false;
+        self.remote_impulse.clear();
     }
 
     /// Number of contacts.
     pub fn len(&self) -> usize {
-        self.locals.len()
+        self.origin.len()
     }
 
     /// Whether it holds no contact.
     pub fn is_empty(&self) -> bool {
-        self.locals.is_empty()
+        self.origin.is_empty()
+    }
+
+    /// Contact `k`'s impulse after the solve.
+    fn impulse(&self, k: usize) -> DVec3 {
+        if self.remote {
+            self.remote_impulse[k]
+        } else {
+            self.locals[k].r
+        }
     }
 }
 
@@ -197,6 +228,9 @@ pub struct InterfaceGroup {
     /// Colour: groups of one colour touch disjoint subdomains.
     pub colour: usize,
     pub bucket: Bucket,
+    /// The dynamic bodies its contacts join (solver numbering, sorted), listed when the
+    /// solve is distributed over ranks: what the group's owner shares after its colour.
+    pub bodies: Vec<u32>,
 }
 
 /// The contacts bucketed by subdomain and interface group, bodies in solver numbering.
@@ -220,7 +254,7 @@ impl DdmProblem {
     /// Buckets `locals` (bodies in the original numbering) by the partition.
     pub fn build(partition: &Partition, locals: &[LocalProblem], parallel_interface: bool) -> Self {
         let mut p = DdmProblem::default();
-        p.rebuild(partition, locals, parallel_interface);
+        p.rebuild(partition, locals, parallel_interface, None);
         p
     }
 
@@ -231,6 +265,7 @@ impl DdmProblem {
         partition: &Partition,
         locals: &[LocalProblem],
         parallel_interface: bool,
+        ranks: Option<(usize, usize)>,
     ) {
         self.rebuild_with(
             partition,
@@ -238,12 +273,17 @@ impl DdmProblem {
             |k| (locals[k].body1, locals[k].body2),
             |k| locals[k],
             parallel_interface,
+            ranks,
         );
     }
 
     /// [`DdmProblem::rebuild`] of `n` contacts that are not built yet: contact `k` joins the
     /// bodies `bodies_of(k)`, and `make(k)` builds its local problem (the caller's numbering)
     /// straight into its bucket, without a copy in the caller's order first.
+    ///
+    /// `ranks = Some((rank, size))`: a solve distributed over `size` ranks, seen from `rank`,
+    /// which builds the local problems of the buckets it owns only ([`sub_owner`],
+    /// [`group_owner`]).
     pub(crate) fn rebuild_with(
         &mut self,
         partition: &Partition,
@@ -251,8 +291,13 @@ impl DdmProblem {
         bodies_of: impl Fn(usize) -> (u32, u32) + Sync,
         make: impl Fn(usize) -> LocalProblem + Sync,
         parallel_interface: bool,
+        ranks: Option<(usize, usize)>,
     ) {
         let k = partition.count();
+        let ranks = ranks.filter(|&(_, size)| size > 1);
+        let remote_sub = |s: usize| ranks.is_some_and(|(me, size)| sub_owner(s, k, size) != me);
+        let remote_group =
+            |pair: (u32, u32)| ranks.is_some_and(|(me, size)| group_owner(pair, k, size) != me);
         let renumber = |idx: u32| {
             let mut l = make(idx as usize);
             l.body1 = partition.new_index[l.body1 as usize];
@@ -303,9 +348,14 @@ impl DdmProblem {
         self.sub
             .par_iter_mut()
             .zip(self.members.par_iter())
-            .for_each(|(bucket, members)| {
+            .enumerate()
+            .for_each(|(s, (bucket, members))| {
                 bucket.clear();
-                bucket.fill(members, renumber);
+                if remote_sub(s) {
+                    bucket.fill_remote(members);
+                } else {
+                    bucket.fill(members, renumber);
+                }
             });
         // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily.
         gamma.sort_unstable();
@@ -314,16 +364,32 @@ impl DdmProblem {
             bucket.clear();
             self.spare.push(bucket);
         }
+        let dynamic = partition.starts[k] as u32;
         for (pair, idx) in gamma {
             if self.groups.last().is_none_or(|g| g.pair != pair) {
+                let mut bucket = self.spare.pop().unwrap_or_default();
+                bucket.remote = remote_group(pair);
                 self.groups.push(InterfaceGroup {
                     pair,
                     colour: 0,
-                    bucket: self.spare.pop().unwrap_or_default(),
+                    bucket,
+                    bodies: Vec::new(),
                 });
             }
             let group = self.groups.last_mut().expect("pushed above");
-            group.bucket.push(renumber(idx), idx);
+            group.bucket.push(|| renumber(idx), idx);
+            if ranks.is_some() {
+                let (b1, b2) = bodies_of(idx as usize);
+                for b in [b1, b2].map(|b| partition.new_index[b as usize]) {
+                    if b < dynamic {
+                        group.bodies.push(b);
+                    }
+                }
+            }
+        }
+        for g in &mut self.groups {
+            g.bodies.sort_unstable();
+            g.bodies.dedup();
         }
         // Greedy colouring, largest groups first (ties by pair): a colour lasts as long as its
         // largest group, so the large groups share the first colours instead of each
@@ -655,6 +721,31 @@ impl Wire for Option<f64> {
     }
 }
 
+/// The rank that owns subdomain `s` of `k` over `size` ranks (see [`exchange::owner`]).
+fn sub_owner(s: usize, k: usize, size: usize) -> usize {
+    exchange::owner(s, k, size)
+}
+
+/// The rank that owns the interface group of subdomains `pair` (its first subdomain's; the
+/// sequential interface, pair `(STATIC, STATIC)`, rank 0's).
+fn group_owner(pair: (u32, u32), k: usize, size: usize) -> usize {
+    match pair.0 {
+        STATIC => 0,
+        a => sub_owner(a as usize, k, size),
+    }
+}
+
+/// A sum's terms of one bucket, as shared between ranks.
+impl Wire for f64 {
+    const LEN: usize = 1;
+    fn put(&self, out: &mut [f64]) {
+        out[0] = *self;
+    }
+    fn take(x: &[f64]) -> Self {
+        x[0]
+    }
+}
+
 /// One step's plan of a solve distributed over ranks: who sweeps what, and which bodies each
 /// bucket shares after its phase.
 struct Ranks<'a> {
@@ -677,33 +768,17 @@ struct Ranks<'a> {
 impl<'a> Ranks<'a> {
     fn new(ex: &'a dyn Exchange, p: &DdmProblem, starts: &'a [usize], dr: &[DriveRows]) -> Self {
         let (k, size) = (p.sub.len(), ex.size());
-        let sub_owner: Vec<usize> = (0..k).map(|s| exchange::owner(s, k, size)).collect();
+        let sub_owner: Vec<usize> = (0..k).map(|s| sub_owner(s, k, size)).collect();
         let dynamic = starts[k] as u32;
         let group_owner = p
             .groups
             .iter()
-            .map(|g| match g.pair.0 {
-                STATIC => 0,
-                a => sub_owner[a as usize],
-            })
+            .map(|g| group_owner(g.pair, k, size))
             .collect();
         let mut read = vec![false; dynamic as usize];
-        let group_bodies: Vec<Vec<u32>> = p
-            .groups
-            .iter()
-            .map(|g| {
-                let mut b: Vec<u32> = g
-                    .bucket
-                    .locals
-                    .iter()
-                    .flat_map(|l| [l.body1, l.body2])
-                    .filter(|&i| i < dynamic)
-                    .collect();
-                b.sort_unstable();
-                b.dedup();
-                b
-            })
-            .collect();
+        // Listed by the rebuild for every group, remote or not (a remote group has no local
+        // problems to read them from).
+        let group_bodies: Vec<Vec<u32>> = p.groups.iter().map(|g| g.bodies.clone()).collect();
         for &i in group_bodies.iter().flatten() {
             read[i as usize] = true;
         }
@@ -822,7 +897,27 @@ impl<'a> Ranks<'a> {
         self.share(&units, &mut [], results);
     }
 
-    /// Every contact's impulse and status, from its bucket's owner.
+    /// Every bucket's per-contact terms `terms` (buckets in the equivalent order), from its
+    /// owner, the only rank that has its local problems.
+    fn share_terms(&mut self, p: &DdmProblem, terms: &mut [f64]) {
+        let t = Instant::now();
+        let units: Vec<Unit> = self
+            .sub_owner
+            .iter()
+            .chain(&self.group_owner)
+            .zip(p.buckets())
+            .map(|(&owner, b)| Unit {
+                owner,
+                bodies: &[],
+                values: b.len(),
+            })
+            .collect();
+        exchange::share(self.ex, &units, &mut [], terms, &mut self.buf);
+        self.seconds += t.elapsed().as_secs_f64();
+    }
+
+    /// Every contact's impulse and status, from its bucket's owner (a remote bucket's
+    /// impulses into [`Bucket::remote_impulse`]).
     fn share_impulses(&mut self, p: &mut DdmProblem) {
         let t = Instant::now();
         const LEN: usize = 4;
@@ -844,25 +939,29 @@ impl<'a> Ranks<'a> {
             .collect();
         self.values.clear();
         for (b, &owner) in p.buckets().zip(&owners) {
+            if owner != me {
+                let at = self.values.len();
+                self.values.resize(at + LEN * b.len(), 0.0);
+                continue;
+            }
             for (l, st) in b.locals.iter().zip(&b.status) {
-                if owner == me {
-                    self.values
-                        .extend_from_slice(&[l.r.x, l.r.y, l.r.z, status_code(*st)]);
-                } else {
-                    self.values.extend_from_slice(&[0.0; LEN]);
-                }
+                self.values
+                    .extend_from_slice(&[l.r.x, l.r.y, l.r.z, status_code(*st)]);
             }
         }
         exchange::share(self.ex, &units, &mut [], &mut self.values, &mut self.buf);
         drop(units);
         let mut at = 0;
         for (b, &owner) in p.buckets_mut().zip(&owners) {
-            for (l, st) in b.locals.iter_mut().zip(b.status.iter_mut()) {
-                if owner != me {
-                    let x = &self.values[at..at + LEN];
-                    l.r = crate::math::DVec3::new(x[0], x[1], x[2]);
-                    *st = status_from_code(x[3]);
-                }
+            if owner == me {
+                at += LEN * b.len();
+                continue;
+            }
+            b.remote_impulse.clear();
+            for st in b.status.iter_mut() {
+                let x = &self.values[at..at + LEN];
+                b.remote_impulse.push(DVec3::new(x[0], x[1], x[2]));
+                *st = status_from_code(x[3]);
                 at += LEN;
             }
         }
@@ -987,6 +1086,12 @@ pub(crate) enum Contacts<'a> {
 }
 
 impl DdmWorkspace {
+    /// The local problems the last solve built: on K ranks those of this rank's own buckets
+    /// only (another rank's are never built here), in one process every contact's.
+    pub fn local_problems(&self) -> usize {
+        self.problem.buckets().map(|b| b.locals.len()).sum()
+    }
+
     /// Builds the local problems of `builder`'s contacts straight into the buckets of
     /// `partition` (no copy of them in the contacts' order first), for [`solve_contacts`]
     /// with [`Contacts::Bucketed`].
@@ -996,12 +1101,14 @@ impl DdmWorkspace {
         builder: &LocalBuilder,
         parallel_interface: bool,
     ) {
+        let ranks = self.exchange.as_ref().map(|e| (e.rank(), e.size()));
         self.problem.rebuild_with(
             partition,
             builder.contacts.len(),
             |k| builder.bodies_of(k),
             |k| builder.at(k),
             parallel_interface,
+            ranks,
         );
     }
 }
@@ -1032,7 +1139,8 @@ pub(crate) fn solve_contacts(
     pb.par_extend(partition.order.par_iter().map(|&i| bodies[i as usize]));
     let n = match &contacts {
         Contacts::Built { locals, .. } => {
-            p.rebuild(partition, locals, ddm.parallel_interface);
+            let ranks = ex.as_ref().map(|e| (e.rank(), e.size()));
+            p.rebuild(partition, locals, ddm.parallel_interface, ranks);
             locals.len()
         }
         Contacts::Bucketed { impulse, status } => {
@@ -1042,6 +1150,18 @@ pub(crate) fn solve_contacts(
     };
     let starts = &partition.starts;
     let mut report = SolveReport::default();
+
+    dr.clear();
+    dr.extend(drives.iter().map(|d| DriveRows {
+        body: partition.new_index[d.body as usize],
+        ..*d
+    }));
+    // Distributed over ranks: each builds and sweeps its own buckets only, and shares what
+    // the others read next.
+    let mut ranks = ex
+        .as_deref()
+        .filter(|e| e.size() > 1)
+        .map(|e| Ranks::new(e, p, starts, dr));
 
     // 1. Residual scale (terms in parallel, summed in the equivalent order), then warm start.
     let buckets: Vec<&Bucket> = p.buckets().collect();
@@ -1060,31 +1180,26 @@ pub(crate) fn solve_contacts(
                 }
             });
     }
-    dr.clear();
-    dr.extend(drives.iter().map(|d| DriveRows {
-        body: partition.new_index[d.body as usize],
-        ..*d
-    }));
+    drop(buckets);
+    if let Some(r) = ranks.as_mut() {
+        r.share_terms(p, terms);
+    }
     let q2: f64 = terms.iter().fold(0.0, |s, &t| s + t) + drive::scale_sum(dr, pb.as_slice());
     let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
-    drop(buckets);
-    // Distributed over ranks: each sweeps its own buckets (the warm start, cheap, every rank
-    // does whole, so the bodies start the same everywhere).
-    let mut ranks = ex
-        .as_deref()
-        .filter(|e| e.size() > 1)
-        .map(|e| Ranks::new(e, p, starts, dr));
     let (sub_mine, group_mine) = match &ranks {
         Some(r) => r.mine(),
         None => (vec![true; p.sub.len()], vec![true; p.groups.len()]),
     };
     let bucket_mine: Vec<bool> = sub_mine.iter().chain(&group_mine).copied().collect();
     let (smine, gmine) = (|s: usize| sub_mine[s], |g: usize| group_mine[g]);
-    let every = |_: usize| true;
+    // The warm start in the sweeps' order, shared as a sweep is.
     let t = Instant::now();
-    for_subdomains(p, pb, starts, min_parallel, &every, |b, v| {
+    let mut none = for_subdomains(p, pb, starts, min_parallel, &smine, |b, v| {
         nlgs.warm_start(&b.locals, v)
     });
+    if let Some(r) = ranks.as_mut() {
+        r.share_subdomains(pb, &mut none, false);
+    }
     times.subdomains += t.elapsed().as_secs_f64();
     let t = Instant::now();
     for_interface(
@@ -1092,8 +1207,12 @@ pub(crate) fn solve_contacts(
         pb,
         starts,
         min_parallel,
-        &every,
-        &mut |_, _, _: &mut [()]| {},
+        &gmine,
+        &mut |range, pb, none: &mut [()]| {
+            if let Some(r) = ranks.as_mut() {
+                r.share_groups(range, pb, none);
+            }
+        },
         |b, v| nlgs.warm_start(&b.locals, v),
     );
     times.interface += t.elapsed().as_secs_f64();
@@ -1205,7 +1324,7 @@ pub(crate) fn solve_contacts(
     let solved = |(st, &(bi, k)): (&mut ContactStatus, &(u32, u32))| {
         let b = buckets[bi as usize];
         *st = b.status[k as usize];
-        b.locals[k as usize].r
+        b.impulse(k as usize)
     };
     let slot = p.slot.par_iter();
     match contacts {
@@ -1256,7 +1375,6 @@ fn correct(
     (sub_mine, group_mine): (&[bool], &[bool]),
 ) -> bool {
     let (smine, gmine) = (|s: usize| sub_mine[s], |g: usize| group_mine[g]);
-    let every = |_: usize| true;
     let starts = &partition.starts;
     pv.clear();
     let (settings, h, e) = (c.settings, c.h, c.elastic);
@@ -1264,21 +1382,26 @@ fn correct(
         pb.par_iter()
             .map(|b| correction::at_rest(b, settings.rotation)),
     );
-    // Every rank finds every bucket's overlaps (cheap): all agree on `found`.
-    let found = for_subdomains(p, pv, starts, min_parallel, &every, |b, _| {
-        correction::overlaps(settings, h, e, &b.locals, &mut b.overlaps)
-    })
-    .into_iter()
-    .chain(for_interface(
-        p,
-        pv,
-        starts,
-        min_parallel,
-        &every,
-        &mut |_, _, _| {},
-        |b, _| correction::overlaps(settings, h, e, &b.locals, &mut b.overlaps),
-    ))
-    .any(|n| n > 0);
+    // Each rank finds its buckets' overlaps; the counts are shared, so all agree on `found`.
+    let overlaps =
+        |b: &mut Bucket| correction::overlaps(settings, h, e, &b.locals, &mut b.overlaps) as f64;
+    let mut counts: Vec<f64> =
+        for_subdomains(p, pv, starts, min_parallel, &smine, |b, _| overlaps(b))
+            .into_iter()
+            .chain(for_interface(
+                p,
+                pv,
+                starts,
+                min_parallel,
+                &gmine,
+                &mut |_, _, _| {},
+                |b, _| overlaps(b),
+            ))
+            .collect();
+    if let Some(r) = ranks.as_deref_mut() {
+        r.share_reports(&mut counts);
+    }
+    let found = counts.iter().any(|&n| n > 0.0);
     if found {
         for _ in 0..settings.sweeps {
             let mut none = vec![(); p.sub.len()];

@@ -2,11 +2,12 @@
 //! whom.
 //!
 //! Every process holds the whole scene and steps it the same way; the DDM solve
-//! ([`super::ddm`]) is what they split. Rank `r` sweeps the subdomains and the interface
-//! groups it owns ([`owner`]: contiguous blocks of subdomains, a rule of the partition
-//! alone), and after each phase of an iteration the ranks share what the phase wrote that
-//! another rank reads next: the velocities of the bodies the interface contacts and the
-//! drives touch, and each bucket's sums for the stop test. At the end of the solve every rank
+//! ([`super::ddm`]) is what they split. Rank `r` builds the local problems of the
+//! subdomains and the interface groups it owns ([`owner`]: contiguous blocks of subdomains, a
+//! rule of the partition alone) and no others, warm-starts and sweeps them, and after each
+//! phase the ranks share what the phase wrote that another rank reads next: the velocities of
+//! the bodies the interface contacts and the drives touch, each bucket's sums for the stop
+//! test, and once a step each contact's share of the residual's scale. At the end of the solve every rank
 //! receives every body's velocities and every contact's impulse, so the scene stays the same
 //! on every process. Sharing copies values: each bucket is swept with the same arithmetic in
 //! the same order as in one process, so a run over K ranks is bit-identical to a
