@@ -2,10 +2,15 @@
 //! these): a pile and the CI-sized tamping run give the `state_digest` of one process with the
 //! same partition on 2 and 3 ranks; a 2-rank run stopped at a step and resumed on 2 ranks
 //! equals the uninterrupted one (ParaView frames too: one piece per rank, the same frames), and
-//! so does its checkpoint (written in parts) resumed by one process; a rank that fails ends
-//! the job with an error, no hang; ranks on one machine share its cores by default.
+//! so does its checkpoint (written in parts) resumed by one process; a 2-rank job killed
+//! (`kill -9` of every process) at a step or while its ranks write a checkpoint resumes on 2
+//! ranks to the uninterrupted run's results; a rank that fails ends the job with an error, no
+//! hang; ranks on one machine share its cores by default.
 #![cfg(feature = "mpi")]
 
+mod common;
+
+use common::{checkpoint_steps, last_row, rows_without_timings, tmp_files, Moments};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
@@ -333,5 +338,140 @@ fn ranks_share_the_machine_by_default() {
         ],
     ));
     assert_eq!(digest(&alone), digest(&out));
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// The processes `mpirun` (pid `job`) started: its children, read from `/proc`.
+fn job_processes(job: u32) -> Vec<u32> {
+    let mut pids = vec![job];
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        // `/proc/PID/stat`: "pid (comm) state ppid …"; the name may hold spaces.
+        let Ok(stat) = std::fs::read_to_string(e.path().join("stat")) else {
+            continue;
+        };
+        let ppid = stat
+            .rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().nth(1))
+            .and_then(|p| p.parse::<u32>().ok());
+        if ppid == Some(job) {
+            pids.push(pid);
+        }
+    }
+    pids
+}
+
+/// `kill -9` of a 2-rank job at seeded moments — at a step (a seeded number of rows on), and
+/// while its ranks write a checkpoint's parts (as soon as a temporary file shows) — each
+/// followed by a 2-rank `--resume` (killed again in turn): the run ends with the summary and
+/// the `series.csv` rows of a run never killed. Every process of the job is killed at once,
+/// as a power cut would: checkpoints every step, so most kills cut a write of parts or of the
+/// manifest.
+#[test]
+fn a_killed_job_resumes_on_its_ranks_bit_identical() {
+    const STEPS: u64 = 600;
+    const KILLS: u64 = 6;
+    let root = tmp("kill9");
+    let text = std::fs::read_to_string(example("examples/pile.toml")).unwrap();
+    let edit = "output_interval = 50";
+    assert!(text.contains(edit));
+    let pile = root.join("pile.toml");
+    let every_step = "output_interval = 1\ncheckpoint_interval = 1";
+    std::fs::write(&pile, text.replacen(edit, every_step, 1)).unwrap();
+    let (d, e) = (root.join("killed"), root.join("reference"));
+    let steps = STEPS.to_string();
+    let command = |resume: bool, dir: &Path| {
+        let mut c = Command::new("mpirun");
+        c.args(["--allow-run-as-root", "--oversubscribe", "-np", "2"])
+            .arg(bin())
+            .arg("run")
+            .arg(&pile)
+            .args(["--subdomains", "2x2x1", "--steps", &steps, "--threads", "1"])
+            .arg("--quiet");
+        if resume {
+            c.arg("--resume").arg(dir);
+        } else {
+            c.args(["--overwrite", "--out"]).arg(dir);
+        }
+        c
+    };
+    ok(run_for(command(false, &e), Duration::from_secs(300)));
+
+    let (series, ckpt) = (d.join("series.csv"), d.join("checkpoints"));
+    let mut rng = Moments(0x2545_f491_4f6c_dd1d);
+    let clock = Instant::now();
+    let (mut mid_write, mut missed, mut log) = (0, Vec::new(), Vec::new());
+    for trial in 0..KILLS {
+        // A kill meant for a checkpoint write that lands outside one is tried again (a fresh
+        // seeded moment).
+        let mut hit = false;
+        for attempt in 0..5 {
+            let resume = !checkpoint_steps(&d).is_empty();
+            let row = last_row(&series);
+            let mut child = command(resume, &d)
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("mpirun (Open MPI) is installed");
+            let exited = |c: &mut std::process::Child| c.try_wait().unwrap().is_some();
+            let mid = trial % 2 == 1;
+            let left = STEPS - row.min(STEPS);
+            // Spread over what is left, half of it at most: the job never ends first.
+            let target = row + 1 + rng.below(left / (KILLS - trial + 1));
+            while last_row(&series) < target && !exited(&mut child) {
+                std::thread::sleep(Duration::from_micros(200));
+            }
+            while mid && tmp_files(&ckpt).is_empty() && !exited(&mut child) {
+                std::hint::spin_loop();
+            }
+            let finished = exited(&mut child);
+            let pids: Vec<String> = job_processes(child.id())
+                .iter()
+                .map(u32::to_string)
+                .collect();
+            let _ = Command::new("kill").arg("-9").args(&pids).status();
+            let out = child.wait_with_output().unwrap();
+            let err = String::from_utf8_lossy(&out.stderr);
+            assert!(!err.contains("panicked"), "trial {trial}: {err}");
+            assert!(
+                !finished,
+                "trial {trial}: the job ended before its kill: {err}\n{log:#?}"
+            );
+            let cut = tmp_files(&ckpt);
+            mid_write += usize::from(mid && !cut.is_empty());
+            log.push(format!(
+                "trial {trial}.{attempt}: {} → row {}, checkpoint {:?}, left {cut:?}",
+                if resume { "resume" } else { "start" },
+                last_row(&series),
+                checkpoint_steps(&d).last()
+            ));
+            assert!(clock.elapsed().as_secs() < 300, "{log:#?}");
+            if !mid || !cut.is_empty() {
+                hit = true;
+                break;
+            }
+        }
+        if !hit {
+            missed.push(trial);
+        }
+    }
+    ok(run_for(command(true, &d), Duration::from_secs(300)));
+    assert!(
+        missed.is_empty() && mid_write >= 2,
+        "kills out of their phase in trials {missed:?}: {log:#?}"
+    );
+    assert_eq!(summary(&d)["status"], "completed");
+    assert!(tmp_files(&ckpt).is_empty(), "a resume deletes cut writes");
+    let without_timings = |dir: &Path| {
+        let mut s = summary(dir);
+        s.as_object_mut().unwrap().remove("timings_s");
+        s
+    };
+    assert_eq!(without_timings(&d), without_timings(&e), "{log:#?}");
+    let (rows, expected) = (rows_without_timings(&d), rows_without_timings(&e));
+    assert_eq!(rows.len() as u64, 1 + STEPS);
+    assert!(rows == expected, "series.csv differs: {log:#?}");
     let _ = std::fs::remove_dir_all(&root);
 }
