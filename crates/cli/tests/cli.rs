@@ -6,7 +6,10 @@ use std::process::Command;
 mod common;
 mod figures;
 
-use common::{checkpoint_steps, last_row, rows_without_timings, tmp_files, Moments};
+use common::{
+    checkpoint_steps, last_row, rows_without_timings, summary, summary_without_timings, tmp_files,
+    Moments,
+};
 
 fn ballast() -> Command {
     Command::new(env!("CARGO_BIN_EXE_ballast"))
@@ -47,10 +50,6 @@ fn tmp(name: &str) -> TmpDir {
     let d = std::env::temp_dir().join(format!("ballast-cli-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     TmpDir(d)
-}
-
-fn summary(dir: &std::path::Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
 }
 
 #[test]
@@ -846,13 +845,6 @@ fn ctrl_c_checkpoints_and_resumes() {
     }
     assert_eq!(summary(&d)["state_digest"], summary(&e)["state_digest"]);
     assert_eq!(summary(&d)["status"], "completed");
-}
-
-/// `summary.json` without its wall-clock timings.
-fn summary_without_timings(dir: &std::path::Path) -> serde_json::Value {
-    let mut s = summary(dir);
-    s.as_object_mut().unwrap().remove("timings_s");
-    s
 }
 
 /// `kill -9` at a dozen seeded moments — at a step, while a checkpoint is being written,

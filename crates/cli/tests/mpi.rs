@@ -10,7 +10,10 @@
 
 mod common;
 
-use common::{checkpoint_steps, last_row, rows_without_timings, tmp_files, Moments};
+use common::{
+    checkpoint_steps, last_row, rows_without_timings, summary, summary_without_timings, tmp_files,
+    Moments,
+};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
@@ -83,10 +86,6 @@ fn ok(o: Output) -> Output {
         String::from_utf8_lossy(&o.stderr)
     );
     o
-}
-
-fn summary(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
 }
 
 fn digest(dir: &Path) -> String {
@@ -341,7 +340,7 @@ fn ranks_share_the_machine_by_default() {
     let _ = std::fs::remove_dir_all(&root);
 }
 
-/// The processes `mpirun` (pid `job`) started: its children, read from `/proc`.
+/// A job's processes: `mpirun` (pid `job`) and its children (the ranks), read from `/proc`.
 fn job_processes(job: u32) -> Vec<u32> {
     let mut pids = vec![job];
     for e in std::fs::read_dir("/proc").unwrap().flatten() {
@@ -464,12 +463,11 @@ fn a_killed_job_resumes_on_its_ranks_bit_identical() {
     );
     assert_eq!(summary(&d)["status"], "completed");
     assert!(tmp_files(&ckpt).is_empty(), "a resume deletes cut writes");
-    let without_timings = |dir: &Path| {
-        let mut s = summary(dir);
-        s.as_object_mut().unwrap().remove("timings_s");
-        s
-    };
-    assert_eq!(without_timings(&d), without_timings(&e), "{log:#?}");
+    assert_eq!(
+        summary_without_timings(&d),
+        summary_without_timings(&e),
+        "{log:#?}"
+    );
     let (rows, expected) = (rows_without_timings(&d), rows_without_timings(&e));
     assert_eq!(rows.len() as u64, 1 + STEPS);
     assert!(rows == expected, "series.csv differs: {log:#?}");

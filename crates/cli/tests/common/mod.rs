@@ -2,6 +2,18 @@
 //! read the way a user's script would.
 #![allow(dead_code)]
 
+/// `DIR/summary.json`.
+pub fn summary(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+/// `summary.json` without its wall-clock timings.
+pub fn summary_without_timings(dir: &std::path::Path) -> serde_json::Value {
+    let mut s = summary(dir);
+    s.as_object_mut().unwrap().remove("timings_s");
+    s
+}
+
 /// The steps of the checkpoints in `DIR/checkpoints`, sorted.
 pub fn checkpoint_steps(dir: &std::path::Path) -> Vec<u64> {
     let mut steps: Vec<u64> = std::fs::read_dir(dir.join("checkpoints"))

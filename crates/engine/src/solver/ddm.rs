@@ -282,7 +282,7 @@ impl DdmProblem {
     /// straight into its bucket, without a copy in the caller's order first.
     ///
     /// `ranks = Some((rank, size))`: a solve distributed over `size` ranks, seen from `rank`,
-    /// which builds the local problems of the buckets it owns only ([`sub_owner`],
+    /// which builds the local problems of the buckets it owns only ([`exchange::owner`],
     /// [`group_owner`]).
     pub(crate) fn rebuild_with(
         &mut self,
@@ -295,7 +295,8 @@ impl DdmProblem {
     ) {
         let k = partition.count();
         let ranks = ranks.filter(|&(_, size)| size > 1);
-        let remote_sub = |s: usize| ranks.is_some_and(|(me, size)| sub_owner(s, k, size) != me);
+        let remote_sub =
+            |s: usize| ranks.is_some_and(|(me, size)| exchange::owner(s, k, size) != me);
         let remote_group =
             |pair: (u32, u32)| ranks.is_some_and(|(me, size)| group_owner(pair, k, size) != me);
         let renumber = |idx: u32| {
@@ -387,9 +388,11 @@ impl DdmProblem {
                 }
             }
         }
-        for g in &mut self.groups {
-            g.bodies.sort_unstable();
-            g.bodies.dedup();
+        if ranks.is_some() {
+            for g in &mut self.groups {
+                g.bodies.sort_unstable();
+                g.bodies.dedup();
+            }
         }
         // Greedy colouring, largest groups first (ties by pair): a colour lasts as long as its
         // largest group, so the large groups share the first colours instead of each
@@ -721,21 +724,16 @@ impl Wire for Option<f64> {
     }
 }
 
-/// The rank that owns subdomain `s` of `k` over `size` ranks (see [`exchange::owner`]).
-fn sub_owner(s: usize, k: usize, size: usize) -> usize {
-    exchange::owner(s, k, size)
-}
-
 /// The rank that owns the interface group of subdomains `pair` (its first subdomain's; the
 /// sequential interface, pair `(STATIC, STATIC)`, rank 0's).
 fn group_owner(pair: (u32, u32), k: usize, size: usize) -> usize {
     match pair.0 {
         STATIC => 0,
-        a => sub_owner(a as usize, k, size),
+        a => exchange::owner(a as usize, k, size),
     }
 }
 
-/// A sum's terms of one bucket, as shared between ranks.
+/// One number per bucket (the correction's overlap counts), as shared between ranks.
 impl Wire for f64 {
     const LEN: usize = 1;
     fn put(&self, out: &mut [f64]) {
@@ -768,7 +766,7 @@ struct Ranks<'a> {
 impl<'a> Ranks<'a> {
     fn new(ex: &'a dyn Exchange, p: &DdmProblem, starts: &'a [usize], dr: &[DriveRows]) -> Self {
         let (k, size) = (p.sub.len(), ex.size());
-        let sub_owner: Vec<usize> = (0..k).map(|s| sub_owner(s, k, size)).collect();
+        let sub_owner: Vec<usize> = (0..k).map(|s| exchange::owner(s, k, size)).collect();
         let dynamic = starts[k] as u32;
         let group_owner = p
             .groups
