@@ -11,50 +11,51 @@ use crate::solver::Exchange;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Values of one shared outcome.
-const VALUES: usize = 25;
+/// Values of a shared outcome before its manifold: bodies, point count, hint, reusable.
+const HEAD: usize = 5;
 
+/// Appends outcome `g` to `out`: its head, then, when it has points, the normal and each
+/// point's position and gap (a pair that is apart, about half of those tested, sends five
+/// values instead of twenty-five).
 fn put(g: &PairGeometry, out: &mut Vec<f64>) {
     out.extend_from_slice(&[
         f64::from(g.body1),
         f64::from(g.body2),
-        g.normal.x,
-        g.normal.y,
-        g.normal.z,
-    ]);
-    for p in &g.points {
-        out.extend_from_slice(&[p.point.x, p.point.y, p.point.z, p.gap]);
-    }
-    out.extend_from_slice(&[
         f64::from(g.len),
         f64::from(g.hint.to_bits()),
-        f64::from(u8::from(g.reused)),
         f64::from(u8::from(g.reusable)),
     ]);
+    if g.len > 0 {
+        out.extend_from_slice(&[g.normal.x, g.normal.y, g.normal.z]);
+        for p in g.points() {
+            out.extend_from_slice(&[p.point.x, p.point.y, p.point.z, p.gap]);
+        }
+    }
 }
 
-fn take(x: &[f64]) -> PairGeometry {
-    let mut points = [ManifoldPoint {
-        point: DVec3::ZERO,
-        gap: 0.0,
-    }; 4];
-    for (k, p) in points.iter_mut().enumerate() {
-        let y = &x[5 + 4 * k..9 + 4 * k];
-        *p = ManifoldPoint {
-            point: DVec3::new(y[0], y[1], y[2]),
-            gap: y[3],
-        };
+/// The outcome at the start of `x` (written by [`put`]) and the number of values it took.
+fn take(x: &[f64]) -> (PairGeometry, usize) {
+    let mut g = PairGeometry::new(
+        x[0] as u32,
+        x[1] as u32,
+        None,
+        FaceHint::from_bits(x[3] as u32),
+    );
+    g.len = x[2] as u8;
+    g.reusable = x[4] == 1.0;
+    let mut at = HEAD;
+    if g.len > 0 {
+        g.normal = DVec3::new(x[at], x[at + 1], x[at + 2]);
+        at += 3;
+        for p in &mut g.points[..g.len as usize] {
+            *p = ManifoldPoint {
+                point: DVec3::new(x[at], x[at + 1], x[at + 2]),
+                gap: x[at + 3],
+            };
+            at += 4;
+        }
     }
-    PairGeometry {
-        body1: x[0] as u32,
-        body2: x[1] as u32,
-        normal: DVec3::new(x[2], x[3], x[4]),
-        points,
-        len: x[21] as u8,
-        hint: FaceHint::from_bits(x[22] as u32),
-        reused: x[23] == 1.0,
-        reusable: x[24] == 1.0,
-    }
+    (g, at)
 }
 
 /// The outcomes of `pairs` into `results`: `reused(k)` for each pair whose manifold is reused
@@ -67,29 +68,44 @@ pub(super) fn narrow_on_ranks(
     compute: impl Fn(usize) -> PairGeometry + Sync,
     results: &mut Vec<PairGeometry>,
 ) -> f64 {
+    // Straight into `results` (no whole-size copy of the outcomes first): a slot that is not
+    // reused is marked so by its `reused` flag until its outcome arrives.
     let blank = PairGeometry::new(0, 0, None, FaceHint::NONE);
-    let first: Vec<Option<PairGeometry>> = (0..pairs).into_par_iter().map(&reused).collect();
-    let todo: Vec<u32> = (0..pairs as u32)
-        .filter(|&k| first[k as usize].is_none())
-        .collect();
     results.clear();
-    results.par_extend(first.into_par_iter().map(|g| g.unwrap_or(blank)));
+    results.par_extend(
+        (0..pairs)
+            .into_par_iter()
+            .map(|k| reused(k).unwrap_or(blank)),
+    );
+    let todo: Vec<u32> = (0..pairs as u32)
+        .filter(|&k| !results[k as usize].reused)
+        .collect();
     // Contiguous shares of the pairs to test, one per rank.
     let (me, size) = (ex.rank(), ex.size());
     let cut = |r: usize| r * todo.len() / size;
     let mine = &todo[cut(me)..cut(me + 1)];
     let computed: Vec<PairGeometry> = mine.par_iter().map(|&k| compute(k as usize)).collect();
     let t = Instant::now();
-    let mut send = Vec::with_capacity(computed.len() * VALUES);
+    let mut send = Vec::with_capacity(computed.len() * HEAD);
     for g in &computed {
         put(g, &mut send);
     }
-    let counts: Vec<usize> = (0..size).map(|r| (cut(r + 1) - cut(r)) * VALUES).collect();
-    let mut all = vec![0.0; todo.len() * VALUES];
+    drop(computed);
+    // Each rank's number of values first: outcomes have different lengths.
+    let mut counts = vec![0.0; size];
+    ex.all_gather(&[send.len() as f64], &vec![1; size], &mut counts);
+    let counts: Vec<usize> = counts.iter().map(|&c| c as usize).collect();
+    let mut all = vec![0.0; counts.iter().sum()];
     ex.all_gather(&send, &counts, &mut all);
-    for (&k, x) in todo.iter().zip(all.chunks_exact(VALUES)) {
-        results[k as usize] = take(x);
+    drop(send);
+    // The ranks' shares follow one another in `todo`'s order.
+    let mut at = 0;
+    for &k in &todo {
+        let (g, used) = take(&all[at..]);
+        results[k as usize] = g;
+        at += used;
     }
+    debug_assert_eq!(at, all.len());
     t.elapsed().as_secs_f64()
 }
 
@@ -110,10 +126,21 @@ mod tests {
         g.reusable = true;
         let mut x = Vec::new();
         put(&g, &mut x);
-        assert_eq!(x.len(), VALUES);
-        let h = take(&x);
+        assert_eq!(x.len(), HEAD + 3 + 4 * 3);
+        // Followed by another outcome, apart: each is read back whole, and only itself.
+        let apart = PairGeometry::new(3, 9, None, FaceHint::new(false, 4));
+        put(&apart, &mut x);
+        assert_eq!(x.len(), 2 * HEAD + 3 + 4 * 3);
+        let (h, used) = take(&x);
+        assert_eq!(used, HEAD + 3 + 4 * 3);
+        let (a, rest) = take(&x[used..]);
+        assert_eq!(
+            (a.body1, a.body2, a.len, a.hint, rest),
+            (3, 9, 0, apart.hint, HEAD)
+        );
         let mut y = Vec::new();
         put(&h, &mut y);
+        put(&a, &mut y);
         assert_eq!(
             x.iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
             y.iter().map(|v| v.to_bits()).collect::<Vec<_>>()
