@@ -280,6 +280,29 @@ impl Enc {
     fn quat(&mut self, q: DQuat) {
         q.to_array().into_iter().for_each(|x| self.f64(x));
     }
+
+    /// The start of a framed file: magic, version, and the payload's length, written by
+    /// [`Enc::finish_frame`] once the payload follows. The payload is encoded in place: a
+    /// checkpoint at scale is hundreds of megabytes, and a copy into a frame would double the
+    /// run's memory at the moment it writes.
+    fn framed(magic: &[u8; 11]) -> Enc {
+        let mut e = Enc(Vec::new());
+        e.0.extend_from_slice(magic);
+        e.u32(FORMAT_VERSION);
+        e.u64(0);
+        debug_assert_eq!(e.0.len(), HEADER_LEN);
+        e
+    }
+
+    /// The framed bytes: the payload's length put in the header, the checksum of all before
+    /// it appended.
+    fn finish_frame(mut self) -> Vec<u8> {
+        let n = (self.0.len() - HEADER_LEN) as u64;
+        self.0[HEADER_LEN - 8..HEADER_LEN].copy_from_slice(&n.to_le_bytes());
+        let sum = fnv1a64(&self.0);
+        self.u64(sum);
+        self.0
+    }
 }
 
 /// Bounds-checked reader; errors name the field and the byte offset.
@@ -663,23 +686,12 @@ fn encode_manifest(world: &World, stats: Option<&RunStats>, parts: &[u64]) -> Ve
     let mut scene = Enc::default();
     Scene::of(world).encode(&mut scene);
 
-    let mut p = Enc::default();
+    let mut p = Enc::framed(MAGIC);
     p.u64(fnv1a64(&scene.0));
     p.0.extend_from_slice(&scene.0);
+    drop(scene);
     encode_state_with(&mut p, world, stats, parts);
-    frame(MAGIC, p)
-}
-
-/// `payload` framed: magic, version, length, payload, checksum.
-fn frame(magic: &[u8; 11], p: Enc) -> Vec<u8> {
-    let mut out = Enc(Vec::with_capacity(HEADER_LEN + p.0.len() + CHECKSUM_LEN));
-    out.0.extend_from_slice(magic);
-    out.u32(FORMAT_VERSION);
-    out.len(p.0.len());
-    out.0.extend_from_slice(&p.0);
-    let sum = fnv1a64(&out.0);
-    out.u64(sum);
-    out.0
+    p.finish_frame()
 }
 
 /// The state section of a checkpoint: clock, timers, body states, contacts, detection

@@ -4,8 +4,8 @@
 //! together, whatever the number of ranks that reads it.
 
 use super::{
-    decode_contacts, encode_anchors, encode_bodies, encode_contacts, frame, unframe_with,
-    CheckpointError, Corruption, Dec, DecResult, Enc, State, HEADER_LEN,
+    decode_contacts, encode_anchors, encode_bodies, encode_contacts, unframe_with, CheckpointError,
+    Corruption, Dec, DecResult, Enc, State, HEADER_LEN,
 };
 use crate::contacts::ContactSet;
 use crate::math::{DQuat, DVec3};
@@ -119,7 +119,7 @@ fn encode_part(world: &World, owners: &Owners, rank: usize) -> Vec<u8> {
     let contacts: Vec<usize> = (0..c.len())
         .filter(|&k| owners.contact(world, k) == rank)
         .collect();
-    let mut p = Enc::default();
+    let mut p = Enc::framed(PART_MAGIC);
     p.u64(super::scene_fingerprint(world));
     p.u64(world.step_index);
     p.u32(rank as u32);
@@ -134,7 +134,7 @@ fn encode_part(world: &World, owners: &Owners, rank: usize) -> Vec<u8> {
     p.len(contacts.len());
     contacts.iter().for_each(|&k| p.u32(k as u32));
     encode_contacts(&mut p, c, contacts.iter().copied());
-    frame(PART_MAGIC, p)
+    p.finish_frame()
 }
 
 /// Reads the parts `spec` names next to the manifest `manifest` (of scene fingerprint
