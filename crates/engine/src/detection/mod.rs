@@ -5,6 +5,7 @@
 
 mod broad;
 pub mod coherence;
+mod outcomes;
 mod ranks;
 // Narrow-phase routines, exposed for the crate's tests and benches; not part of the supported
 // API.
@@ -14,6 +15,7 @@ pub mod narrow;
 pub(crate) use broad::{Aabb, BroadPhase};
 pub(crate) use coherence::Anchors;
 pub use narrow::{FaceHint, Manifold, ManifoldPoint, WorldPolyhedron};
+use outcomes::Outcomes;
 
 use crate::bodies::{BodyKind, BodySet};
 use crate::math::{DQuat, DVec3};
@@ -67,11 +69,11 @@ pub struct Detector {
     cached_for: Option<(u64, u64)>,
     /// This step's candidate pairs, sorted, and their outcomes: at the next step, the cache.
     pairs: Vec<(u32, u32)>,
-    results: Vec<PairGeometry>,
+    results: Outcomes,
     /// Scratch for the next step's pairs and outcomes (buffers kept across steps: megabytes
     /// allocated afresh every step cost page faults), and for merging the half-space pairs.
     spare_pairs: Vec<(u32, u32)>,
-    spare_results: Vec<PairGeometry>,
+    spare_results: Outcomes,
     merged: Vec<(u32, u32)>,
     /// The body kinds of the last detection (the broad phase's skip rule depends on them).
     kinds: Vec<BodyKind>,
@@ -84,7 +86,8 @@ pub struct Detector {
 /// A pair's narrow-phase outcome at the anchor poses: bodies (body 1 first), manifold (`len`
 /// points, none when apart), the face hint for the pair's next test, whether it was reused,
 /// and whether it may be: only a manifold computed with both bodies' margins at the slow-body
-/// value is a function of the anchors alone.
+/// value is a function of the anchors alone. A value passed around while a step's outcomes
+/// are assembled; they are kept in [`Outcomes`].
 #[derive(Clone, Copy, Debug)]
 struct PairGeometry {
     body1: u32,
@@ -173,7 +176,7 @@ impl Detector {
 
     /// Pairs whose manifold the last detection reused, and candidate pairs in all.
     pub fn reuse_counts(&self) -> (usize, usize) {
-        let reused = self.results.par_iter().filter(|r| r.reused).count();
+        let reused = self.results.heads().par_iter().filter(|r| r.reused).count();
         (reused, self.results.len())
     }
 
@@ -412,19 +415,19 @@ impl Detector {
         let this = &*self;
         let (previous_pairs, previous) = (&self.pairs, &self.results);
         let moved = &self.anchors.moved;
-        let last_of = |pair: (u32, u32)| {
-            previous_pairs
-                .binary_search(&pair)
-                .ok()
-                .map(|k| &previous[k])
+        let last_of = |pair: (u32, u32)| previous_pairs.binary_search(&pair).ok();
+        let reused = |(i, j): (u32, u32), last: Option<usize>| {
+            last.filter(|&l| {
+                previous.heads()[l].reusable && !moved[i as usize] && !moved[j as usize]
+            })
+            .map(|l| PairGeometry {
+                reused: true,
+                ..previous.get(l)
+            })
         };
-        let reused = |(i, j): (u32, u32), last: Option<&PairGeometry>| {
-            last.filter(|l| l.reusable && !moved[i as usize] && !moved[j as usize])
-                .map(|l| PairGeometry { reused: true, ..*l })
-        };
-        let compute = |(i, j): (u32, u32), last: Option<&PairGeometry>| {
+        let compute = |(i, j): (u32, u32), last: Option<usize>| {
             let (iu, ju) = (i as usize, j as usize);
-            let hint = last.map_or(FaceHint::NONE, |l| l.hint);
+            let hint = last.map_or(FaceHint::NONE, |l| previous.heads()[l].hint);
             let alert = alert + reach(margins[iu]) + reach(margins[ju]);
             let reusable = reuse > 0.0 && margins[iu] <= reuse && margins[ju] <= reuse;
             let geometry = match (this.world_poly(bodies, iu), this.world_poly(bodies, ju)) {
@@ -454,22 +457,18 @@ impl Detector {
                 // Both lists are sorted: each run of pairs bisects for its first pair's
                 // outcome, then walks forward with the pairs (a bisection per pair costs more
                 // than reusing its manifold).
-                const PAIRS_PER_TASK: usize = 128;
-                // Every slot is written below: only new ones need a value.
-                results.resize(pairs.len(), PairGeometry::new(0, 0, None, FaceHint::NONE));
-                results
-                    .par_chunks_mut(PAIRS_PER_TASK)
-                    .zip(pairs.par_chunks(PAIRS_PER_TASK))
-                    .for_each(|(out, run)| {
-                        let mut p = previous_pairs.partition_point(|q| *q < run[0]);
-                        for (slot, &pair) in out.iter_mut().zip(run) {
-                            while p < previous_pairs.len() && previous_pairs[p] < pair {
-                                p += 1;
-                            }
-                            let last = (previous_pairs.get(p) == Some(&pair)).then(|| &previous[p]);
-                            *slot = reused(pair, last).unwrap_or_else(|| compute(pair, last));
+                results.assemble(pairs.len(), |range, push| {
+                    let run = &pairs[range];
+                    let Some(first) = run.first() else { return };
+                    let mut p = previous_pairs.partition_point(|q| q < first);
+                    for &pair in run {
+                        while p < previous_pairs.len() && previous_pairs[p] < pair {
+                            p += 1;
                         }
-                    });
+                        let last = (previous_pairs.get(p) == Some(&pair)).then_some(p);
+                        push(reused(pair, last).unwrap_or_else(|| compute(pair, last)));
+                    }
+                });
                 0.0
             }
             Some(ex) => ranks::narrow_on_ranks(
@@ -510,17 +509,12 @@ fn merge_sorted<T: Copy + Ord>(a: &[T], b: &[T], out: &mut Vec<T>) {
 /// each surface (`p ∓ g/2 n`) moves with its body, the normal with body 1, and the gap is the
 /// distance between the feet along the normal.
 fn write_points(
-    results: &[PairGeometry],
+    results: &Outcomes,
     anchors: &Anchors,
     bodies: &BodySet,
     transport: bool,
     out: &mut Vec<RawContact>,
 ) {
-    const CHUNK: usize = 1024;
-    let counts: Vec<usize> = results
-        .par_chunks(CHUNK)
-        .map(|c| c.iter().map(|r| r.len as usize).sum())
-        .collect();
     let blank = RawContact {
         body1: 0,
         body2: 0,
@@ -528,23 +522,26 @@ fn write_points(
         normal: DVec3::ZERO,
         gap: 0.0,
     };
+    // Each run of pairs writes its points, in pair order, where the runs before it end.
+    let counts: Vec<usize> = results.runs().map(|(_, run)| run.point_count()).collect();
     out.resize(counts.iter().sum(), blank);
-    let (slices, _) = split_lengths(out, counts.iter().copied());
+    let (slices, _) = split_lengths(out, counts);
     slices
         .into_par_iter()
-        .zip(results.par_chunks(CHUNK))
-        .for_each(|(dst, chunk)| {
+        .zip(results.runs())
+        .for_each(|(dst, (chunk, run))| {
             let mut d = dst.iter_mut();
-            for r in chunk {
+            for r in chunk.iter().filter(|r| r.len > 0) {
                 let (b1, b2) = (r.body1 as usize, r.body2 as usize);
                 let still = !transport || anchors.is_at_anchor(b1) && anchors.is_at_anchor(b2);
                 // The pair's normal turns with body 1, the same for all its points.
+                let stored = run.normal(r);
                 let normal = if still {
-                    r.normal
+                    stored
                 } else {
-                    anchors.turn(b1, r.normal)
+                    anchors.turn(b1, stored)
                 };
-                for p in r.points() {
+                for p in run.points(r) {
                     let Some(slot) = d.next() else { return };
                     *slot = if still {
                         RawContact {
@@ -555,8 +552,8 @@ fn write_points(
                             gap: p.gap,
                         }
                     } else {
-                        let foot1 = anchors.transport(bodies, b1, p.point - 0.5 * p.gap * r.normal);
-                        let foot2 = anchors.transport(bodies, b2, p.point + 0.5 * p.gap * r.normal);
+                        let foot1 = anchors.transport(bodies, b1, p.point - 0.5 * p.gap * stored);
+                        let foot2 = anchors.transport(bodies, b2, p.point + 0.5 * p.gap * stored);
                         RawContact {
                             body1: r.body1,
                             body2: r.body2,

@@ -5,7 +5,7 @@
 //! outcome. An outcome is the same whichever rank computes it, so detection is bit-identical
 //! to one process.
 
-use super::{FaceHint, ManifoldPoint, PairGeometry};
+use super::{FaceHint, ManifoldPoint, Outcomes, PairGeometry};
 use crate::math::DVec3;
 use crate::solver::Exchange;
 use rayon::prelude::*;
@@ -58,6 +58,14 @@ fn take(x: &[f64]) -> (PairGeometry, usize) {
     (g, at)
 }
 
+/// Number of values of the outcome at the start of `x` (written by [`put`]).
+fn length(x: &[f64]) -> usize {
+    match x[2] as usize {
+        0 => HEAD,
+        n => HEAD + 3 + 4 * n,
+    }
+}
+
 /// The outcomes of `pairs` into `results`: `reused(k)` for each pair whose manifold is reused
 /// (every rank), `compute(k)` for this rank's share of the others, the rest from the ranks
 /// that computed them. Returns the seconds spent sharing.
@@ -66,19 +74,20 @@ pub(super) fn narrow_on_ranks(
     pairs: usize,
     reused: impl Fn(usize) -> Option<PairGeometry> + Sync,
     compute: impl Fn(usize) -> PairGeometry + Sync,
-    results: &mut Vec<PairGeometry>,
+    results: &mut Outcomes,
 ) -> f64 {
-    // Straight into `results` (no whole-size copy of the outcomes first): a slot that is not
-    // reused is marked so by its `reused` flag until its outcome arrives.
+    // The reused outcomes first (a pair to test is marked by its `reused` flag, false).
     let blank = PairGeometry::new(0, 0, None, FaceHint::NONE);
-    results.clear();
-    results.par_extend(
-        (0..pairs)
-            .into_par_iter()
-            .map(|k| reused(k).unwrap_or(blank)),
-    );
-    let todo: Vec<u32> = (0..pairs as u32)
-        .filter(|&k| !results[k as usize].reused)
+    let mut first = Outcomes::default();
+    first.assemble(pairs, |range, push| {
+        range.for_each(|k| push(reused(k).unwrap_or(blank)));
+    });
+    let todo: Vec<u32> = first
+        .heads()
+        .par_iter()
+        .enumerate()
+        .filter(|(_, h)| !h.reused)
+        .map(|(k, _)| k as u32)
         .collect();
     // Contiguous shares of the pairs to test, one per rank.
     let (me, size) = (ex.rank(), ex.size());
@@ -98,15 +107,27 @@ pub(super) fn narrow_on_ranks(
     let mut all = vec![0.0; counts.iter().sum()];
     ex.all_gather(&send, &counts, &mut all);
     drop(send);
-    // The ranks' shares follow one another in `todo`'s order.
-    let mut at = 0;
-    for &k in &todo {
-        let (g, used) = take(&all[at..]);
-        results[k as usize] = g;
-        at += used;
+    // The ranks' shares follow one another in `todo`'s order: where each outcome starts.
+    let mut at = Vec::with_capacity(todo.len());
+    let mut next = 0;
+    for _ in &todo {
+        at.push(next);
+        next += length(&all[next..]);
     }
-    debug_assert_eq!(at, all.len());
-    t.elapsed().as_secs_f64()
+    debug_assert_eq!(next, all.len());
+    let shared = t.elapsed().as_secs_f64();
+    results.assemble(pairs, |range, push| {
+        let mut i = todo.partition_point(|&k| (k as usize) < range.start);
+        for k in range {
+            if todo.get(i) == Some(&(k as u32)) {
+                push(take(&all[at[i]..]).0);
+                i += 1;
+            } else {
+                push(first.get(k));
+            }
+        }
+    });
+    shared
 }
 
 #[cfg(test)]
@@ -133,6 +154,7 @@ mod tests {
         assert_eq!(x.len(), 2 * HEAD + 3 + 4 * 3);
         let (h, used) = take(&x);
         assert_eq!(used, HEAD + 3 + 4 * 3);
+        assert_eq!((length(&x), length(&x[used..])), (used, HEAD));
         let (a, rest) = take(&x[used..]);
         assert_eq!(
             (a.body1, a.body2, a.len, a.hint, rest),
