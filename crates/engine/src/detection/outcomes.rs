@@ -1,7 +1,7 @@
 //! A step's narrow-phase outcomes, one per candidate pair in pair order, kept for the next
 //! step's reuse, stored compactly: about half of the candidate pairs are apart and a manifold
-//! averages two points, so a fixed slot of four points per pair (168 bytes) held three times
-//! what the outcomes need. Each pair has a 24-byte head; the manifolds' normals and points are
+//! averages two points, so a fixed slot of four points per pair (168 bytes) held more than
+//! twice what the outcomes need (about 70 bytes a pair). Each pair has a 24-byte head; the manifolds' normals and points are
 //! kept per run of [`CHUNK`] pairs, in pair order, in vectors that live from step to step (no
 //! allocation, no joining copy once they have grown).
 
@@ -12,7 +12,7 @@ use std::ops::Range;
 
 /// Pairs per run: enough that a run's search of last step's outcomes and its two small
 /// vectors cost little against its narrow-phase tests.
-pub(super) const CHUNK: usize = 512;
+const CHUNK: usize = 512;
 
 /// A pair's outcome without its manifold: bodies (body 1 first), point count, face hint,
 /// whether it was reused and whether it may be, and where its manifold is in its run.
@@ -174,7 +174,11 @@ mod tests {
             FaceHint::new(k.is_multiple_of(2), k),
         );
         // Every third pair apart; the others with 1 to 4 points.
-        g.len = if k.is_multiple_of(3) { 0 } else { (k % 4 + 1) as u8 };
+        g.len = if k.is_multiple_of(3) {
+            0
+        } else {
+            (k % 4 + 1) as u8
+        };
         if g.len > 0 {
             g.normal = DVec3::new(k as f64, 0.5, -1.0 / (k as f64 + 1.0));
         }
