@@ -4,8 +4,8 @@
 //! Every process holds the whole scene and steps it the same way; the DDM solve
 //! ([`super::ddm`]) is what they split. Rank `r` builds the local problems of the
 //! subdomains it owns ([`owner`]: contiguous blocks of subdomains, a rule of the partition
-//! alone) and of its share of the interface groups (balanced colour by colour) and no others, warm-starts and sweeps them, and after each
-//! phase the ranks share what the phase wrote that another rank reads next: the velocities of
+//! alone) and of its share of the interface groups (balanced colour by colour) and no others,
+//! warm-starts and sweeps them, and after each phase the ranks share what the phase wrote that another rank reads next: the velocities of
 //! the bodies the interface contacts and the drives touch, each bucket's sums for the stop
 //! test, and once a step each contact's share of the residual's scale. At the end of the solve every rank
 //! receives every body's velocities and every contact's impulse, so the scene stays the same
