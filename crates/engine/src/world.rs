@@ -853,6 +853,12 @@ impl World {
                 times.subdomains = t.subdomains;
                 times.interface = t.interface;
                 times.communication += t.communication;
+                // The next detection tests each pair where this solve held it.
+                self.detector.owners = self
+                    .exchange
+                    .as_ref()
+                    .filter(|e| e.size() > 1)
+                    .map(|e| sc.ddm_workspace.pair_owners(&partition, e.size()));
                 (report, corrected)
             }
         };

@@ -21,6 +21,7 @@ use crate::bodies::{BodyKind, BodySet};
 use crate::math::{DQuat, DVec3};
 use crate::shapes::{ConvexPolyhedron, Shape};
 use crate::slices::split_lengths;
+use crate::solver::exchange::PairOwners;
 use crate::solver::Exchange;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -81,6 +82,9 @@ pub struct Detector {
     pub(crate) exchange: Option<Arc<dyn Exchange>>,
     /// Seconds the last detection spent sharing between ranks.
     pub(crate) shared_seconds: f64,
+    /// The rank that tests each pair in a distributed run (none before the first solve: the
+    /// pairs are then cut into contiguous shares).
+    pub(crate) owners: Option<PairOwners>,
 }
 
 /// A pair's narrow-phase outcome at the anchor poses: bodies (body 1 first), manifold (`len`
@@ -452,6 +456,10 @@ impl Detector {
                 ..geometry
             }
         };
+        let holder = self
+            .owners
+            .as_ref()
+            .map(|o| |k: usize| o.of(pairs[k].0, pairs[k].1));
         let shared = match exchange.as_deref() {
             None => {
                 // Both lists are sorted: each run of pairs bisects for its first pair's
@@ -474,6 +482,7 @@ impl Detector {
             Some(ex) => ranks::narrow_on_ranks(
                 ex,
                 pairs.len(),
+                holder.as_ref().map(|h| h as _),
                 |k| reused(pairs[k], last_of(pairs[k])),
                 |k| compute(pairs[k], last_of(pairs[k])),
                 &mut results,

@@ -1,8 +1,8 @@
 //! The narrow phase divided between the ranks of a distributed run (see
 //! [`crate::solver::exchange`]): every rank holds the same bodies, finds the same candidate
-//! pairs and reuses the same manifolds; the pairs left to test are cut into one contiguous
-//! share per rank, each rank tests its share, and an all-gather gives every rank every
-//! outcome. An outcome is the same whichever rank computes it, so detection is bit-identical
+//! pairs and reuses the same manifolds; each pair left to test goes to the rank that holds it
+//! (see [`crate::solver::exchange::PairOwners`]), each rank tests its pairs, and an all-gather
+//! gives every rank every outcome. An outcome is the same whichever rank computes it, so detection is bit-identical
 //! to one process.
 
 use super::{FaceHint, ManifoldPoint, Outcomes, PairGeometry};
@@ -67,11 +67,13 @@ fn length(x: &[f64]) -> usize {
 }
 
 /// The outcomes of `pairs` into `results`: `reused(k)` for each pair whose manifold is reused
-/// (every rank), `compute(k)` for this rank's share of the others, the rest from the ranks
+/// (every rank), `compute(k)` for the pairs to test that this rank holds (`holder(k)`, the
+/// pair's rank; without one, contiguous shares of the pairs to test), the rest from the ranks
 /// that computed them. Returns the seconds spent sharing.
 pub(super) fn narrow_on_ranks(
     ex: &dyn Exchange,
     pairs: usize,
+    holder: Option<&(dyn Fn(usize) -> usize + Sync)>,
     reused: impl Fn(usize) -> Option<PairGeometry> + Sync,
     compute: impl Fn(usize) -> PairGeometry + Sync,
     results: &mut Outcomes,
@@ -89,11 +91,22 @@ pub(super) fn narrow_on_ranks(
         .filter(|(_, h)| !h.reused)
         .map(|(k, _)| k as u32)
         .collect();
-    // Contiguous shares of the pairs to test, one per rank.
+    // Each pair to test goes to its rank.
     let (me, size) = (ex.rank(), ex.size());
-    let cut = |r: usize| r * todo.len() / size;
-    let mine = &todo[cut(me)..cut(me + 1)];
+    let rank_of: Vec<u32> = match holder {
+        Some(h) => todo.par_iter().map(|&k| h(k as usize) as u32).collect(),
+        None => (0..todo.len())
+            .map(|i| (i * size / todo.len().max(1)) as u32)
+            .collect(),
+    };
+    let mine: Vec<u32> = todo
+        .iter()
+        .zip(&rank_of)
+        .filter(|(_, &r)| r as usize == me)
+        .map(|(&k, _)| k)
+        .collect();
     let computed: Vec<PairGeometry> = mine.par_iter().map(|&k| compute(k as usize)).collect();
+    drop(mine);
     let t = Instant::now();
     let mut send = Vec::with_capacity(computed.len() * HEAD);
     for g in &computed {
@@ -107,14 +120,29 @@ pub(super) fn narrow_on_ranks(
     let mut all = vec![0.0; counts.iter().sum()];
     ex.all_gather(&send, &counts, &mut all);
     drop(send);
-    // The ranks' shares follow one another in `todo`'s order: where each outcome starts.
+    // The ranks' outcomes follow one another, each rank's in `todo`'s order: where each
+    // outcome starts.
+    let mut cursor: Vec<usize> = counts
+        .iter()
+        .scan(0, |at, &c| {
+            let start = *at;
+            *at += c;
+            Some(start)
+        })
+        .collect();
     let mut at = Vec::with_capacity(todo.len());
-    let mut next = 0;
-    for _ in &todo {
-        at.push(next);
-        next += length(&all[next..]);
+    for &r in &rank_of {
+        let c = &mut cursor[r as usize];
+        at.push(*c);
+        *c += length(&all[*c..]);
     }
-    debug_assert_eq!(next, all.len());
+    debug_assert!(cursor
+        .iter()
+        .zip(counts.iter().scan(0, |e, &c| {
+            *e += c;
+            Some(*e)
+        }))
+        .all(|(&c, e)| c == e));
     let shared = t.elapsed().as_secs_f64();
     results.assemble(pairs, |range, push| {
         let mut i = todo.partition_point(|&k| (k as usize) < range.start);

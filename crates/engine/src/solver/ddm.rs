@@ -1128,6 +1128,18 @@ impl DdmWorkspace {
         self.problem.buckets().map(|b| b.locals.len()).sum()
     }
 
+    /// Which rank holds each body pair after the last solve over `partition`, on `size`
+    /// ranks (see [`exchange::PairOwners`]).
+    pub(crate) fn pair_owners(&self, partition: &Partition, size: usize) -> exchange::PairOwners {
+        let groups = self
+            .problem
+            .groups
+            .iter()
+            .map(|g| (g.pair, g.owner))
+            .collect();
+        exchange::PairOwners::new(partition, groups, size)
+    }
+
     /// Builds the local problems of `builder`'s contacts straight into the buckets of
     /// `partition` (no copy of them in the contacts' order first), for [`solve_contacts`]
     /// with [`Contacts::Bucketed`].
@@ -1603,6 +1615,74 @@ mod tests {
         assert_eq!(group_owners(&runs, &colour, colours, 1), [0; 6]);
         // The sequential interface is rank 0's whatever the ranks.
         assert_eq!(group_owners(&[((STATIC, STATIC), 9)], &[0], 1, 3), [0]);
+    }
+
+    proptest::proptest! {
+        /// The rank [`exchange::PairOwners`] gives a pair is the owner of the bucket its
+        /// contacts were solved in (subdomain or interface group), on any scene and ranks,
+        /// with Γ in groups or sequential; a pair without contacts gets a rank too.
+        #[test]
+        fn a_pair_is_held_by_the_owner_of_its_bucket(
+            positions in proptest::collection::vec((0.0f64..1.0, 0.0f64..1.0, 0.0f64..1.0), 12..60),
+            picks in proptest::collection::vec((0usize..1000, 0usize..1000), 1..150),
+            dims in proptest::sample::select(vec![[2usize, 1, 1], [2, 2, 1], [3, 2, 2], [4, 1, 1]]),
+            size in 1usize..5,
+            parallel_interface in proptest::bool::ANY,
+        ) {
+            let n = positions.len();
+            let positions: Vec<DVec3> = positions.iter().map(|&(x, y, z)| DVec3::new(x, y, z)).collect();
+            // The last three bodies are static (walls, drivers): a pair has a dynamic body.
+            let dynamic: Vec<bool> = (0..n).map(|i| i < n - 3).collect();
+            let partition =
+                Partition::build(&positions, &dynamic, dims, Balance::Volume, &vec![1.0; n]);
+            let mut pairs: Vec<(u32, u32)> = picks
+                .iter()
+                .map(|&(a, b)| ((a % n) as u32, (b % (n - 3)) as u32))
+                .filter(|(a, b)| a != b)
+                .map(|(a, b)| (a.min(b), a.max(b)))
+                .collect();
+            pairs.sort_unstable();
+            let local = |(body1, body2): (u32, u32)| LocalProblem {
+                body1,
+                body2,
+                dynamic1: true,
+                dynamic2: true,
+                frame: [DVec3::X, DVec3::Y],
+                r1: DVec3::ZERO,
+                r2: DVec3::ZERO,
+                w: crate::math::Sym3::from_mat(crate::math::DMat3::IDENTITY),
+                gap: 0.0,
+                mu: 0.0,
+                r: DVec3::ZERO,
+                r_prev: 0.0,
+                rt_prev: [0.0; 2],
+                seen: [0; 2],
+            };
+            let mut ws = DdmWorkspace::default();
+            ws.problem.rebuild_with(
+                &partition,
+                pairs.len(),
+                |k| pairs[k],
+                |k| local(pairs[k]),
+                parallel_interface,
+                Some((0, size)),
+            );
+            let owners = ws.pair_owners(&partition, size);
+            let k = partition.count();
+            for (c, &(a, b)) in pairs.iter().enumerate() {
+                let (bucket, _) = ws.problem.slot[c];
+                let expected = match bucket as usize {
+                    s if s < k => exchange::owner(s, k, size),
+                    g => ws.problem.groups[g - k].owner,
+                };
+                proptest::prop_assert_eq!(owners.of(a, b), expected, "pair {:?}", (a, b));
+            }
+            for a in 0..n as u32 {
+                for b in a + 1..n as u32 {
+                    proptest::prop_assert!(owners.of(a, b) < size);
+                }
+            }
+        }
     }
 
     proptest::proptest! {

@@ -18,6 +18,7 @@
 //! [`ThreadRanks`] in-process, for tests.
 
 use super::delassus::SolverBody;
+use super::partition::{Partition, STATIC};
 use crate::math::DVec3;
 use std::sync::{Arc, Barrier, Mutex};
 
@@ -37,6 +38,68 @@ pub trait Exchange: Send + Sync + std::fmt::Debug {
 /// subdomains (boxes numbered along x first, so a rank's boxes are neighbours).
 pub fn owner(s: usize, n: usize, size: usize) -> usize {
     s * size / n.max(1)
+}
+
+/// Which rank holds each body pair of a distributed run: the owner of the bucket its contacts
+/// were solved in at the last step ([`owner`] for a subdomain's pairs, the group's rank for
+/// an interface group's). Detection hands each pair to this rank, so the pair's last
+/// outcome and contacts, which it reuses and warm-starts from, are where it is tested. Any
+/// rule would give the same results (an outcome is the same whichever rank computes it);
+/// this one puts the work where the data is.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct PairOwners {
+    /// Each body's subdomain ([`STATIC`] for the others).
+    subdomain: Vec<u32>,
+    /// Number of subdomains, and of ranks.
+    count: usize,
+    size: usize,
+    /// The interface groups' subdomain pairs, sorted, and their ranks.
+    groups: Vec<((u32, u32), usize)>,
+    /// Γ solved as one sequential group (pair `(STATIC, STATIC)`).
+    sequential: bool,
+}
+
+impl PairOwners {
+    /// The owners of the solve over `partition` whose interface groups had `groups` (subdomain
+    /// pair, rank), over `size` ranks.
+    pub(crate) fn new(
+        partition: &Partition,
+        mut groups: Vec<((u32, u32), usize)>,
+        size: usize,
+    ) -> Self {
+        groups.sort_unstable();
+        let sequential = groups.first().is_some_and(|g| g.0 .0 == STATIC);
+        PairOwners {
+            subdomain: partition.subdomain.clone(),
+            count: partition.count(),
+            size,
+            groups,
+            sequential,
+        }
+    }
+
+    /// The rank that holds the pair of bodies `i`, `j`.
+    pub(crate) fn of(&self, i: u32, j: u32) -> usize {
+        let sub = |b: u32| self.subdomain.get(b as usize).copied().unwrap_or(STATIC);
+        let by_sub = |s: u32| owner(s as usize, self.count, self.size);
+        match (sub(i), sub(j)) {
+            (STATIC, STATIC) => 0,
+            (a, b) if a == b => by_sub(a),
+            (STATIC, s) | (s, STATIC) => by_sub(s),
+            (a, b) => {
+                let key = if self.sequential {
+                    (STATIC, STATIC)
+                } else {
+                    (a.min(b), a.max(b))
+                };
+                match self.groups.binary_search_by_key(&key, |g| g.0) {
+                    Ok(g) => self.groups[g].1,
+                    // No contact joined the two subdomains at the last step.
+                    Err(_) => by_sub(a.min(b)),
+                }
+            }
+        }
+    }
 }
 
 /// Values of a body a solve changes, as shared: velocities and the skip and term-cache
