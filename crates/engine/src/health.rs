@@ -366,14 +366,14 @@ impl HealthCheck {
                 }
             }
         }
-        let c = &world.contacts;
-        let mut overlap = 0.0f64;
-        for k in 0..c.len() {
+        let overlap = world.max_over_contacts(0.0, |c, k| {
             let ratio = -c.gap[k] / self.overlap_bound(c.body1[k] as usize, c.body2[k] as usize);
             if ratio.is_finite() {
-                overlap = overlap.max(ratio);
+                ratio
+            } else {
+                0.0
             }
-        }
+        });
         (speed, overlap)
     }
 
@@ -450,8 +450,11 @@ impl HealthCheck {
                 self.speed_basis.clone(),
             );
         }
-        // 3. Overlaps of the contacts detected at the start of the step.
-        let c = &world.contacts;
+        // 3. Overlaps of the contacts detected at the start of the step (those past their
+        // bound, from every rank).
+        let c = &world.gather_contacts(|c, k| {
+            -c.gap[k] > self.overlap_bound(c.body1[k] as usize, c.body2[k] as usize)
+        });
         let mut worst: Option<(usize, f64, f64)> = None;
         let mut count = 0;
         for k in 0..c.len() {
@@ -498,9 +501,8 @@ pub fn initial_warnings(world: &World, depth: f64, lines: usize) -> Vec<String> 
     let b = &world.bodies;
     let name = |i: u32| format!("{i} (group \"{}\")", world.group_name(b.group[i as usize]));
     let mut out = Vec::new();
-    let c = &world.contacts;
+    let c = &world.gather_contacts(|c, k| -c.gap[k] > depth);
     let mut deep: Vec<(f64, u32, u32)> = (0..c.len())
-        .filter(|&k| -c.gap[k] > depth)
         .map(|k| (-c.gap[k], c.body1[k], c.body2[k]))
         .collect();
     deep.sort_by(|a, b| b.0.total_cmp(&a.0));

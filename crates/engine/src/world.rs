@@ -12,7 +12,7 @@
 //!    (see [`crate::solver::correction`]), which leaves the velocities untouched.
 
 use crate::bodies::{BodyKind, BodySet, Limits};
-use crate::contacts::ContactSet;
+use crate::contacts::{ContactSet, Skeleton};
 use crate::detection::{Detector, RawContact};
 use crate::laws::{default_overlap_cap, driven_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
@@ -271,6 +271,8 @@ pub struct StepReport {
 #[derive(Debug)]
 pub struct World {
     pub bodies: BodySet,
+    /// The step's contacts; in a domain-decomposed run shared between ranks, those this rank
+    /// holds (see [`World::holds_contact`], [`World::gather_contacts`]).
     pub contacts: ContactSet,
     pub friction: FrictionTable,
     pub settings: StepSettings,
@@ -302,6 +304,9 @@ pub struct World {
     /// The ranks this world's DDM solves are shared with, in a run distributed over processes
     /// (see [`crate::solver::exchange`]); `None`: it solves alone.
     exchange: Option<Arc<dyn Exchange>>,
+    /// When each rank holds its own pairs ([`World::holds_contact`]): every contact of the
+    /// step as all ranks see it, and where this rank's are among them.
+    pub(crate) skeleton: Skeleton,
     /// The step pipeline's buffers: nothing in them carries over from one step to the next
     /// (see [`World::release_scratch`]).
     scratch: Scratch,
@@ -357,6 +362,7 @@ impl World {
             drive_lag: Vec::new(),
             drives: Vec::new(),
             exchange: None,
+            skeleton: Skeleton::default(),
             scratch: Scratch::default(),
         }
         .with_attached_velocities()
@@ -445,9 +451,17 @@ impl World {
     fn partition_from(&self, d: &DdmSettings, sorted: &mut SortedAxes) -> Partition {
         let n = self.bodies.len();
         let mut weights = vec![1.0; n];
-        for k in 0..self.contacts.len() {
-            weights[self.contacts.body1[k] as usize] += 1.0;
-            weights[self.contacts.body2[k] as usize] += 1.0;
+        if self.detector.hold {
+            // Every rank's contacts: the same weights on every rank.
+            for &(a, b) in &self.skeleton.bodies {
+                weights[a as usize] += 1.0;
+                weights[b as usize] += 1.0;
+            }
+        } else {
+            for k in 0..self.contacts.len() {
+                weights[self.contacts.body1[k] as usize] += 1.0;
+                weights[self.contacts.body2[k] as usize] += 1.0;
+            }
         }
         // Force-limited driven bodies are written by the solver: they belong to the subdomain
         // of their centre like the grains.
@@ -584,6 +598,12 @@ impl World {
         self.exchange.as_deref()
     }
 
+    /// Whether each rank holds its own pairs and contacts: a domain-decomposed run shared
+    /// between ranks (a monolithic solve runs whole on every rank).
+    fn holds_pairs(&self) -> bool {
+        self.settings.ddm.is_some() && self.exchange.as_ref().is_some_and(|e| e.size() > 1)
+    }
+
     /// Frees the step pipeline's buffers (local problems, solver bodies, detection output,
     /// domain-decomposition workspace: about 0.5 kB per contact point), as Rapier's pipeline
     /// can be dropped: the next step rebuilds them from the state, with the same result bit
@@ -644,7 +664,9 @@ impl World {
         // Driven bodies whose release time has come move freely from this step on.
         self.bodies.apply_releases(self.time);
 
-        // 1. Detection at qᵢ and warm start.
+        // 1. Detection at qᵢ and warm start (of this rank's pairs only, when each rank of a
+        // domain-decomposed run holds its own).
+        self.detector.hold = self.holds_pairs();
         std::mem::swap(&mut self.scratch.previous, &mut self.contacts);
         self.detector.detect(
             &self.bodies,
@@ -661,9 +683,15 @@ impl World {
             s.match_fraction,
             self.detector.radii(),
         );
-        let max_penetration = self.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g));
-        times.detection = lap.lap();
         times.communication = self.detector.shared_seconds;
+        if self.detector.hold {
+            let ex = self.exchange.as_deref().expect("a rank holds pairs");
+            let (skeleton, seconds) = Skeleton::gather(ex, &self.contacts);
+            self.skeleton = skeleton;
+            times.communication += seconds;
+        }
+        let max_penetration = self.max_over_contacts(0.0, |c, k| -c.gap[k]);
+        times.detection = lap.lap();
 
         // 2. Free velocities.
         let b = &self.bodies;
@@ -775,12 +803,14 @@ impl World {
                 (build, self.prepare_with(build))
             }
         };
-        let deepest = self
-            .contacts
-            .gap
-            .iter()
-            .position(|&g| -g == max_penetration)
-            .map_or([0, 0], |k| [self.contacts.body1[k], self.contacts.body2[k]]);
+        // A rank that holds its pairs builds its local problems once they have moved to it.
+        let built = built && !self.detector.hold;
+        // The first contact (in pair order) that overlaps the most.
+        let deepest = self.gather_contacts(|c, k| -c.gap[k] == max_penetration);
+        let deepest = match deepest.len() {
+            0 => [0, 0],
+            _ => [deepest.body1[0], deepest.body2[0]],
+        };
         let mut lap = Lap::start();
         let nlgs = self.nlgs();
         let s = &self.settings;
@@ -818,13 +848,55 @@ impl World {
                 let partition = self.partition_from(d, &mut sorted);
                 self.scratch.sorted_axes = sorted;
                 self.scratch.ddm_workspace.exchange = self.exchange.clone();
-                if !built {
+                let hold = self.detector.hold;
+                if hold {
+                    // Each rank holds its own pairs: the step's contacts are bucketed from the
+                    // skeleton, the pairs whose bucket another rank solves move there, then
+                    // each rank builds its buckets from the contacts it holds.
+                    let ex = self.exchange.clone().expect("a rank holds pairs");
+                    let mut ws = std::mem::take(&mut self.scratch.ddm_workspace);
+                    let (skeleton, attach) = (&self.skeleton, &self.scratch.attach);
+                    let bodies_of = |g: usize| {
+                        let (a, b) = skeleton.bodies[g];
+                        match attach.is_empty() {
+                            true => (a, b),
+                            false => (attach[a as usize], attach[b as usize]),
+                        }
+                    };
+                    ws.plan(
+                        &partition,
+                        skeleton.bodies.len(),
+                        bodies_of,
+                        d.parallel_interface,
+                    );
+                    let owners = ws.pair_owners(&partition, ex.size(), attach);
+                    times.communication += self.detector.migrate(&*ex, &owners);
+                    times.communication += self.contacts.migrate(&*ex, &owners);
+                    self.skeleton.locate(&self.contacts);
+                    debug_assert!(self
+                        .skeleton
+                        .global
+                        .iter()
+                        .all(|&g| ws.planned_owner(g as usize) == ex.rank()));
+                    let local = self.skeleton.local_of();
+                    let builder = self.local_builder();
+                    ws.fill(&partition, |g| builder.at(local[g] as usize));
+                    self.scratch.ddm_workspace = ws;
+                    // The next detection tests each pair where this solve holds it.
+                    self.detector.owners = Some(owners);
+                } else if !built {
                     let mut ws = std::mem::take(&mut self.scratch.ddm_workspace);
                     ws.bucket(&partition, &self.local_builder(), d.parallel_interface);
                     self.scratch.ddm_workspace = ws;
                 }
                 let (sc, cs) = (&mut self.scratch, &mut self.contacts);
-                let contacts = if built {
+                let contacts = if hold {
+                    ddm::Contacts::Held {
+                        impulse: &mut cs.impulse,
+                        status: &mut cs.status,
+                        global: &self.skeleton.global,
+                    }
+                } else if built {
                     ddm::Contacts::Built {
                         locals: &mut sc.locals,
                         status: &mut cs.status,
@@ -853,12 +925,6 @@ impl World {
                 times.subdomains = t.subdomains;
                 times.interface = t.interface;
                 times.communication += t.communication;
-                // The next detection tests each pair where this solve held it.
-                self.detector.owners = self
-                    .exchange
-                    .as_ref()
-                    .filter(|e| e.size() > 1)
-                    .map(|e| sc.ddm_workspace.pair_owners(&partition, e.size()));
                 (report, corrected)
             }
         };
@@ -962,7 +1028,7 @@ impl World {
         StepReport {
             step: self.step_index,
             time: self.time,
-            contacts: self.contacts.len(),
+            contacts: self.contact_total(),
             solve,
             max_penetration,
             deepest,

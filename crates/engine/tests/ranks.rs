@@ -15,11 +15,13 @@ fn pile(subdomains: [usize; 3], parallel_interface: bool, paddle: bool) -> World
     common::compliant_pile(subdomains, parallel_interface, paddle)
 }
 
-/// What a run leaves: each step's solve, the bodies' digest, the impulses' bits, and the
-/// seconds its ranks spent sharing.
+/// What a run leaves: each step's solve and its contact count, largest overlap and deepest
+/// pair (reduced over the ranks), the bodies' digest, the impulses' bits (gathered from the
+/// ranks that hold them), and the seconds its ranks spent sharing.
 #[derive(Debug, PartialEq)]
 struct Trace {
     solves: Vec<SolveReport>,
+    contacts: Vec<(usize, u64, [u32; 2])>,
     digest: String,
     impulses: Vec<[u64; 3]>,
 }
@@ -27,20 +29,25 @@ struct Trace {
 fn trace(w: &mut World, steps: usize) -> (Trace, f64) {
     // Checks shared between ranks are full passes (`solver.hot_first` works alone): the
     // decisions are the same, only the count of checks the hot contacts decided differs.
-    let solves = (0..steps)
-        .map(|_| SolveReport {
-            hot_proofs: 0,
-            ..w.step().solve
+    let (solves, contacts) = (0..steps)
+        .map(|_| {
+            let r = w.step();
+            let solve = SolveReport {
+                hot_proofs: 0,
+                ..r.solve
+            };
+            (solve, (r.contacts, r.max_penetration.to_bits(), r.deepest))
         })
-        .collect();
+        .unzip();
     let impulses = w
-        .contacts
+        .gather_contacts(|_, _| true)
         .impulse
         .iter()
         .map(|r| [r.x.to_bits(), r.y.to_bits(), r.z.to_bits()])
         .collect();
     let t = Trace {
         solves,
+        contacts,
         digest: state_digest(&w.bodies),
         impulses,
     };
@@ -139,8 +146,8 @@ fn one_interface_group_on_ranks_is_bit_identical() {
 }
 
 /// Each rank builds the local problems of the subdomains and interface groups it owns and no
-/// others: over K ranks they add up to one process's, every contact's once, and no rank holds
-/// them all.
+/// others, and keeps those contacts only: over K ranks they add up to one process's, every
+/// contact's once, and no rank holds them all.
 #[test]
 fn each_rank_builds_only_its_own_local_problems() {
     let make = || pile([2, 2, 1], true, false);
@@ -164,7 +171,10 @@ fn each_rank_builds_only_its_own_local_problems() {
             (w.ddm_local_problems(), w.contacts.len())
         });
         for (rank, &(mine, contacts)) in held.iter().enumerate() {
-            assert_eq!(contacts, all, "{k} ranks, rank {rank}: the same contacts");
+            assert_eq!(
+                contacts, mine,
+                "{k} ranks, rank {rank}: a rank keeps the contacts it solves, no other"
+            );
             assert!(
                 mine > 0 && mine < all,
                 "{k} ranks, rank {rank}: {mine} of {all} local problems"

@@ -137,7 +137,11 @@ impl Indicators {
             .collect();
         out.extend(self.blocks.iter().map(|&i| b.position[i].z));
         let ids: Vec<u32> = self.tines.iter().flatten().map(|&i| i as u32).collect();
-        let impulses = world.contacts.impulses_on(&ids);
+        // The tines' contacts, from every rank, in pair order (the sums a single process
+        // makes).
+        let touching =
+            world.gather_contacts(|c, k| ids.contains(&c.body1[k]) || ids.contains(&c.body2[k]));
+        let impulses = touching.impulses_on(&ids);
         let h = world.settings.dt;
         for pair in impulses.chunks(2) {
             let f = (pair[0] + pair[1]) / h;
@@ -173,10 +177,11 @@ impl Indicators {
         if n == 0 {
             return 0.0;
         }
-        // Contacts are grouped by pair (sorted by unordered pair): count distinct loaded pairs.
+        // Contacts are grouped by pair (sorted by unordered pair): count distinct loaded pairs,
+        // each on the rank that holds it.
         let mut pairs = 0usize;
         let mut last = (u32::MAX, u32::MAX);
-        for k in 0..c.len() {
+        for k in (0..c.len()).filter(|&k| world.holds_contact(k)) {
             let (a, b) = (c.body1[k], c.body2[k]);
             if !(self.grains.contains(&(a as usize)) && self.grains.contains(&(b as usize))) {
                 continue;
@@ -190,6 +195,7 @@ impl Indicators {
                 last = key;
             }
         }
+        let pairs = world.sum_over_ranks(pairs as u64);
         2.0 * pairs as f64 / n as f64
     }
 }

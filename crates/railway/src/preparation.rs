@@ -829,14 +829,15 @@ fn heal(
         world.prepare();
     }
     let wedged = wedged_grains(world, prep.heal_overlap, grains);
-    let c = &world.contacts;
-    let max_penetration = (0..c.len())
-        .filter(|&k| {
-            wedged.binary_search(&(c.body1[k] as usize)).is_err()
-                && wedged.binary_search(&(c.body2[k] as usize)).is_err()
-        })
-        .map(|k| -c.gap[k])
-        .fold(0.0f64, f64::max);
+    let max_penetration = world.max_over_contacts(0.0, |c, k| {
+        let kept = wedged.binary_search(&(c.body1[k] as usize)).is_err()
+            && wedged.binary_search(&(c.body2[k] as usize)).is_err();
+        if kept {
+            -c.gap[k]
+        } else {
+            0.0
+        }
+    });
     Healed {
         steps,
         settled_penetration,
@@ -967,12 +968,13 @@ fn place_on_height_map(
 /// `bound` or more: of each such contact, its lighter grain,
 /// or its grain when the other body is not one; the lower index when both are as heavy.
 fn wedged_grains(world: &World, bound: f64, grains: std::ops::Range<usize>) -> Vec<usize> {
-    let c = &world.contacts;
+    // The contacts that deep, from every rank, in pair order.
+    let c = &world.gather_contacts(|c, k| c.gap[k] <= -bound || c.gap[k].is_nan());
     let mass = |i: usize| 1.0 / world.bodies.inv_mass[i];
     let mut out: Vec<usize> = Vec::new();
     for k in 0..c.len() {
         let (a, b) = (c.body1[k] as usize, c.body2[k] as usize);
-        if c.gap[k] > -bound || out.contains(&a) || out.contains(&b) {
+        if out.contains(&a) || out.contains(&b) {
             continue;
         }
         let take = match (grains.contains(&a), grains.contains(&b)) {
@@ -995,7 +997,7 @@ fn wedged_grains(world: &World, bound: f64, grains: std::ops::Range<usize>) -> V
 
 /// Largest overlap among the world's current contacts (m).
 fn max_overlap(world: &World) -> f64 {
-    world.contacts.gap.iter().fold(0.0f64, |m, &g| m.max(-g))
+    world.max_over_contacts(0.0, |c, k| -c.gap[k])
 }
 
 /// Largest and mean speed of the dynamic bodies (m/s), rotation included through the

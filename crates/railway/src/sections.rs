@@ -166,7 +166,8 @@ impl Sections {
         let b = &world.bodies;
         let h = world.settings.dt;
         let mut load = vec![0.0; self.grains.len()];
-        let c = &world.contacts;
+        // The loaded contacts, from every rank, in pair order.
+        let c = &world.gather_contacts(|c, k| c.impulse[k].x > 0.0 || c.impulse[k].x.is_nan());
         for (k, r) in c.impulse.iter().enumerate() {
             if r.x <= 0.0 {
                 continue;

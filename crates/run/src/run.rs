@@ -1019,20 +1019,36 @@ impl Job {
                 vtk.write_frame(world).map_err(frame_error)?;
             }
             world.detect();
+            // What rank 0 computes over the contacts of every rank, it computes with the
+            // others: each rank makes the same collective calls, in the same order.
+            initial_warnings(world, OVERLAP_REPORT, OVERLAP_LINES as usize / 4);
             if let Err(d) = self.health.initial().check(world) {
                 return Err(diverged(&d, out, names));
             }
         }
+        let sections = self.track.as_ref().map(|t| t.sections(steps));
+        let mut last_indicators = None;
         while world.step_index < steps {
             let r = world.step();
             self.stats.add(&r);
             if let Err(d) = self.health.check(world) {
                 return Err(diverged(&d, out, names));
             }
+            let k = r.step;
+            // Rank 0's series row and sections (see above).
+            if let Some(t) = &self.track {
+                if k.is_multiple_of(self.output_interval) || k == steps {
+                    last_indicators = Some((k, t.indicators.values(world)));
+                }
+            }
+            if let Some(s) = &sections {
+                for _ in s.due(k) {
+                    s.planes.iter().for_each(|p| drop(s.points(world, p)));
+                }
+            }
             if frame_at(r.step) {
                 vtk.write_frame(world).map_err(frame_error)?;
             }
-            let k = r.step;
             if checkpoint_interval > 0 && k.is_multiple_of(checkpoint_interval) && k != steps {
                 write_checkpoint_on_ranks(world, Some(&self.stats), &checkpoint_path(&ckpt_dir, k))
                     .map_err(part_error)?;
@@ -1044,7 +1060,12 @@ impl Job {
         observer.finish();
         let last = checkpoint_path(&ckpt_dir, world.step_index);
         write_checkpoint_on_ranks(world, Some(&self.stats), &last).map_err(part_error)?;
-        let summary = summary_json(world, &self.stats, o.threads, &self.track, None, None)?;
+        // Rank 0's summary reuses its last row's indicators when that row is of this step.
+        let finals = match last_indicators {
+            Some((step, v)) if step == world.step_index => Some(v),
+            _ => None,
+        };
+        let summary = summary_json(world, &self.stats, o.threads, &self.track, finals, None)?;
         Ok(RunOutcome {
             summary,
             steps: world.step_index,

@@ -7,6 +7,9 @@ use crate::detection::RawContact;
 use crate::laws::{ContactStatus, FrictionTable};
 use crate::math::{frame_from_normal, DVec3};
 
+mod ranks;
+pub(crate) use ranks::Skeleton;
+
 /// All contacts of a step, as a structure of arrays, sorted by body pair.
 #[derive(Clone, Debug, Default)]
 pub struct ContactSet {

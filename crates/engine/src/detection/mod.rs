@@ -85,6 +85,10 @@ pub struct Detector {
     /// The rank that tests each pair in a distributed run (none before the first solve: the
     /// pairs are then cut into contiguous shares).
     pub(crate) owners: Option<PairOwners>,
+    /// Whether this rank of a distributed run holds its pairs: it tests and keeps the
+    /// outcomes of its own pairs only, and writes only their points (see [`ranks`]); else
+    /// every rank gets every outcome.
+    pub(crate) hold: bool,
 }
 
 /// A pair's narrow-phase outcome at the anchor poses: bodies (body 1 first), manifold (`len`
@@ -412,10 +416,14 @@ impl Detector {
             merge_sorted(&pairs[..from_broad], &pairs[from_broad..], &mut self.merged);
             std::mem::swap(&mut pairs, &mut self.merged);
         }
+        let exchange = self.exchange.clone().filter(|e| e.size() > 1);
+        // A rank that holds its pairs keeps only those.
+        if let Some(ex) = exchange.as_deref().filter(|_| self.hold) {
+            ranks::keep_own(ex, self.owners.as_ref(), &mut pairs);
+        }
         // Each pair: last step's outcome (parallel, no serial merge), reused if neither body
         // was re-anchored, else computed at the anchors with its hint.
         let mut results = std::mem::take(&mut self.spare_results);
-        let exchange = self.exchange.clone().filter(|e| e.size() > 1);
         let this = &*self;
         let (previous_pairs, previous) = (&self.pairs, &self.results);
         let moved = &self.anchors.moved;
@@ -456,11 +464,7 @@ impl Detector {
                 ..geometry
             }
         };
-        let holder = self
-            .owners
-            .as_ref()
-            .map(|o| |k: usize| o.of(pairs[k].0, pairs[k].1));
-        let shared = match exchange.as_deref() {
+        let shared = match exchange.as_deref().filter(|_| !self.hold) {
             None => {
                 // Both lists are sorted: each run of pairs bisects for its first pair's
                 // outcome, then walks forward with the pairs (a bisection per pair costs more
@@ -482,7 +486,6 @@ impl Detector {
             Some(ex) => ranks::narrow_on_ranks(
                 ex,
                 pairs.len(),
-                holder.as_ref().map(|h| h as _),
                 |k| reused(pairs[k], last_of(pairs[k])),
                 |k| compute(pairs[k], last_of(pairs[k])),
                 &mut results,

@@ -1,13 +1,16 @@
-//! The narrow phase divided between the ranks of a distributed run (see
-//! [`crate::solver::exchange`]): every rank holds the same bodies, finds the same candidate
-//! pairs and reuses the same manifolds; each pair left to test goes to the rank that holds it
-//! (see [`crate::solver::exchange::PairOwners`]), each rank tests its pairs, and an all-gather
-//! gives every rank every outcome. An outcome is the same whichever rank computes it, so detection is bit-identical
-//! to one process.
+//! The narrow phase of a distributed run (see [`crate::solver::exchange`]). Every rank holds
+//! the same bodies and finds the same candidate pairs. In a domain-decomposed run each rank
+//! keeps the pairs it holds ([`keep_own`]) and tests, reuses and keeps their outcomes only;
+//! the outcomes of pairs that change rank move with them ([`Detector::migrate`]). Without
+//! domain decomposition every rank solves the whole step: the pairs left to test are cut
+//! into one contiguous share per rank, each rank tests its share, and an all-gather gives
+//! every rank every outcome ([`narrow_on_ranks`]). An outcome is the same whichever rank
+//! computes it, so detection is bit-identical to one process.
 
-use super::{FaceHint, ManifoldPoint, Outcomes, PairGeometry};
+use super::{Detector, FaceHint, ManifoldPoint, Outcomes, PairGeometry};
 use crate::math::DVec3;
-use crate::solver::Exchange;
+use crate::solver::exchange::PairOwners;
+use crate::solver::{exchange, Exchange};
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -66,14 +69,114 @@ fn length(x: &[f64]) -> usize {
     }
 }
 
+/// Keeps, of the candidate `pairs` (sorted), those this rank holds: `owners`' rule, or
+/// before the first solve contiguous shares of the list.
+pub(super) fn keep_own(
+    ex: &dyn Exchange,
+    owners: Option<&PairOwners>,
+    pairs: &mut Vec<(u32, u32)>,
+) {
+    let (me, size, n) = (ex.rank(), ex.size(), pairs.len());
+    match owners {
+        Some(o) => {
+            let own: Vec<bool> = pairs.par_iter().map(|&(i, j)| o.of(i, j) == me).collect();
+            let mut k = 0;
+            pairs.retain(|_| {
+                k += 1;
+                own[k - 1]
+            });
+        }
+        None => {
+            pairs.truncate((me + 1) * n / size);
+            pairs.drain(..me * n / size);
+        }
+    }
+}
+
+impl Detector {
+    /// Hands the outcomes of this rank's pairs that `owners` gives to other ranks to them,
+    /// and takes in those they hand it: afterwards each rank keeps, in pair order, the
+    /// outcomes of the pairs it holds — what its next detection reuses (a collective). Returns
+    /// the seconds spent sharing.
+    pub(crate) fn migrate(&mut self, ex: &dyn Exchange, owners: &PairOwners) -> f64 {
+        let me = ex.rank();
+        let holder: Vec<usize> = self
+            .pairs
+            .par_iter()
+            .map(|&(i, j)| owners.of(i, j))
+            .collect();
+        let mut send = Vec::new();
+        for (l, &h) in holder.iter().enumerate() {
+            if h != me {
+                send.push(h as f64);
+                put(&self.results.get(l), &mut send);
+            }
+        }
+        let t = Instant::now();
+        let (all, _) = exchange::gather_varying(ex, &send);
+        let seconds = t.elapsed().as_secs_f64();
+        let mut arrived: Vec<PairGeometry> = Vec::new();
+        let mut at = 0;
+        while at < all.len() {
+            let to = all[at] as usize;
+            let (g, used) = take(&all[at + 1..]);
+            if to == me {
+                arrived.push(g);
+            }
+            at += 1 + used;
+        }
+        if send.is_empty() && arrived.is_empty() {
+            return seconds;
+        }
+        let key = |g: &PairGeometry| (g.body1.min(g.body2), g.body1.max(g.body2));
+        // From several ranks, each in pair order; no pair twice (each had one holder).
+        arrived.sort_by_key(key);
+        // The kept and the arrived outcomes, merged in pair order.
+        enum From {
+            Kept(usize),
+            Arrived(usize),
+        }
+        let mut order = Vec::with_capacity(self.pairs.len() + arrived.len());
+        let mut pairs = std::mem::take(&mut self.spare_pairs);
+        pairs.clear();
+        let mut a = arrived.iter().enumerate().peekable();
+        for (l, &pair) in self.pairs.iter().enumerate() {
+            if holder[l] != me {
+                continue;
+            }
+            while let Some((i, g)) = a.next_if(|(_, g)| key(g) < pair) {
+                order.push(From::Arrived(i));
+                pairs.push(key(g));
+            }
+            order.push(From::Kept(l));
+            pairs.push(pair);
+        }
+        for (i, g) in a {
+            order.push(From::Arrived(i));
+            pairs.push(key(g));
+        }
+        let mut results = std::mem::take(&mut self.spare_results);
+        let old = &self.results;
+        results.assemble(order.len(), |range, push| {
+            for o in &order[range] {
+                push(match *o {
+                    From::Kept(l) => old.get(l),
+                    From::Arrived(i) => arrived[i],
+                });
+            }
+        });
+        self.spare_pairs = std::mem::replace(&mut self.pairs, pairs);
+        self.spare_results = std::mem::replace(&mut self.results, results);
+        seconds
+    }
+}
+
 /// The outcomes of `pairs` into `results`: `reused(k)` for each pair whose manifold is reused
-/// (every rank), `compute(k)` for the pairs to test that this rank holds (`holder(k)`, the
-/// pair's rank; without one, contiguous shares of the pairs to test), the rest from the ranks
-/// that computed them. Returns the seconds spent sharing.
+/// (every rank), `compute(k)` for this rank's contiguous share of the others, the rest from
+/// the ranks that computed them. Returns the seconds spent sharing.
 pub(super) fn narrow_on_ranks(
     ex: &dyn Exchange,
     pairs: usize,
-    holder: Option<&(dyn Fn(usize) -> usize + Sync)>,
     reused: impl Fn(usize) -> Option<PairGeometry> + Sync,
     compute: impl Fn(usize) -> PairGeometry + Sync,
     results: &mut Outcomes,
@@ -91,14 +194,11 @@ pub(super) fn narrow_on_ranks(
         .filter(|(_, h)| !h.reused)
         .map(|(k, _)| k as u32)
         .collect();
-    // Each pair to test goes to its rank.
+    // Contiguous shares of the pairs to test, one per rank.
     let (me, size) = (ex.rank(), ex.size());
-    let rank_of: Vec<u32> = match holder {
-        Some(h) => todo.par_iter().map(|&k| h(k as usize) as u32).collect(),
-        None => (0..todo.len())
-            .map(|i| (i * size / todo.len().max(1)) as u32)
-            .collect(),
-    };
+    let rank_of: Vec<u32> = (0..todo.len())
+        .map(|i| (i * size / todo.len().max(1)) as u32)
+        .collect();
     let mine: Vec<u32> = todo
         .iter()
         .zip(&rank_of)
@@ -113,12 +213,8 @@ pub(super) fn narrow_on_ranks(
         put(g, &mut send);
     }
     drop(computed);
-    // Each rank's number of values first: outcomes have different lengths.
-    let mut counts = vec![0.0; size];
-    ex.all_gather(&[send.len() as f64], &vec![1; size], &mut counts);
-    let counts: Vec<usize> = counts.iter().map(|&c| c as usize).collect();
-    let mut all = vec![0.0; counts.iter().sum()];
-    ex.all_gather(&send, &counts, &mut all);
+    // Outcomes have different lengths.
+    let (all, counts) = exchange::gather_varying(ex, &send);
     drop(send);
     // The ranks' outcomes follow one another, each rank's in `todo`'s order: where each
     // outcome starts.

@@ -127,6 +127,26 @@ pub enum ContactStatus {
     Slide,
 }
 
+impl ContactStatus {
+    /// The status as a number (0, 1, 2), as ranks share it.
+    pub(crate) fn code(self) -> f64 {
+        match self {
+            ContactStatus::NoContact => 0.0,
+            ContactStatus::Stick => 1.0,
+            ContactStatus::Slide => 2.0,
+        }
+    }
+
+    /// The status of [`ContactStatus::code`] `x`.
+    pub(crate) fn from_code(x: f64) -> Self {
+        match x as u8 {
+            1 => ContactStatus::Stick,
+            2 => ContactStatus::Slide,
+            _ => ContactStatus::NoContact,
+        }
+    }
+}
+
 /// Solves the local Signorini-Coulomb problem `u = u_free + W r` of one contact exactly.
 ///
 /// `w` is the Delassus block `W_αα` (symmetric positive definite) in the contact frame

@@ -711,7 +711,7 @@ fn encode_state_with(p: &mut Enc, world: &World, stats: Option<&RunStats>, parts
         encode_arrays(p, world);
     } else {
         p.len(world.bodies.len());
-        p.len(world.contacts.len());
+        p.len(world.contact_total());
         p.u8(u8::from(parts::has_anchors(world)));
         parts.iter().for_each(|&s| p.u64(s));
     }

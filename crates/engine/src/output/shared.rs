@@ -1,7 +1,7 @@
-//! Outputs of a world whose solves are shared between ranks: which rank owns each body and
-//! contact, for the parts each rank writes (VTK pieces, checkpoint parts) — a rule of the
-//! scene alone, so every rank finds the same owners — and the agreement that every part is
-//! written.
+//! Outputs of a world whose solves are shared between ranks: which rank owns each body, for
+//! the parts each rank writes (VTK pieces, checkpoint parts) — a rule of the scene alone, so
+//! every rank finds the same owners — and the agreement that every part is written. A
+//! contact goes in the part of the rank that holds it ([`World::holds_contact`]).
 
 use crate::bodies::BodyKind;
 use crate::solver::partition::STATIC;
@@ -46,19 +46,6 @@ impl Owners {
                 .collect(),
         };
         Owners { body }
-    }
-
-    /// Contact `c` belongs to the owner of its first dynamic body.
-    pub fn contact(&self, world: &World, c: usize) -> usize {
-        let (b1, b2) = (
-            world.contacts.body1[c] as usize,
-            world.contacts.body2[c] as usize,
-        );
-        if world.bodies.kind[b1] == BodyKind::Dynamic {
-            self.body[b1]
-        } else {
-            self.body[b2]
-        }
     }
 }
 

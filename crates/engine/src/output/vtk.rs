@@ -246,7 +246,7 @@ impl VtkWriter {
                         if k == 0 {
                             write_bodies(&path, world, false, &|i| owners.body[i] == rank)
                         } else {
-                            write_contacts(&path, world, &|c| owners.contact(world, c) == rank)
+                            write_contacts(&path, world, &|c| world.holds_contact(c))
                         }
                         .map_err(|e| naming(&path, e))
                     }

@@ -249,6 +249,8 @@ pub struct DdmProblem {
     members: Vec<Vec<u32>>,
     /// Per caller contact: its bucket (in the equivalent order) and its place there.
     slot: Vec<(u32, u32)>,
+    /// Scratch of [`DdmProblem::plan`]: Γ's contacts (caller's indices) by subdomain pair.
+    gamma: Vec<((u32, u32), u32)>,
     /// The interface groups' buckets of the step before, emptied: the next groups take
     /// them, so that Γ's local problems are not copied again as their vectors grow.
     spare: Vec<Bucket>,
@@ -297,16 +299,23 @@ impl DdmProblem {
         parallel_interface: bool,
         ranks: Option<(usize, usize)>,
     ) {
+        self.plan(partition, n, bodies_of, parallel_interface, ranks);
+        self.fill(partition, make, ranks);
+    }
+
+    /// The first half of [`DdmProblem::rebuild_with`]: each contact's bucket, the interface
+    /// groups, their colours and ranks; no local problem built yet (see
+    /// [`DdmProblem::fill`]). Between the two, the owner of each bucket is known.
+    pub(crate) fn plan(
+        &mut self,
+        partition: &Partition,
+        n: usize,
+        bodies_of: impl Fn(usize) -> (u32, u32) + Sync,
+        parallel_interface: bool,
+        ranks: Option<(usize, usize)>,
+    ) {
         let k = partition.count();
         let ranks = ranks.filter(|&(_, size)| size > 1);
-        let remote_sub =
-            |s: usize| ranks.is_some_and(|(me, size)| exchange::owner(s, k, size) != me);
-        let renumber = |idx: u32| {
-            let mut l = make(idx as usize);
-            l.body1 = partition.new_index[l.body1 as usize];
-            l.body2 = partition.new_index[l.body2 as usize];
-            l
-        };
         // Each contact's subdomain (`STATIC`: Γ), read in parallel.
         let subdomain = |idx: usize| {
             let (b1, b2) = bodies_of(idx);
@@ -331,7 +340,8 @@ impl DdmProblem {
         self.members.iter_mut().for_each(Vec::clear);
         self.slot.clear();
         self.slot.resize(n, (0, 0));
-        let mut gamma: Vec<((u32, u32), u32)> = Vec::new();
+        let gamma = &mut self.gamma;
+        gamma.clear();
         for (idx, &owner) in owners.iter().enumerate() {
             if owner != STATIC {
                 let members = &mut self.members[owner as usize];
@@ -347,24 +357,11 @@ impl DdmProblem {
                 gamma.push((pair, idx as u32));
             }
         }
-        self.sub.resize_with(k, Bucket::default);
-        self.sub
-            .par_iter_mut()
-            .zip(self.members.par_iter())
-            .enumerate()
-            .for_each(|(s, (bucket, members))| {
-                bucket.clear();
-                if remote_sub(s) {
-                    bucket.fill_remote(members);
-                } else {
-                    bucket.fill(members, renumber);
-                }
-            });
         // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily,
-        // give each group its rank, then fill the groups.
+        // give each group its rank.
         gamma.sort_unstable();
         let mut runs: Vec<((u32, u32), usize)> = Vec::new();
-        for &(pair, _) in &gamma {
+        for &(pair, _) in gamma.iter() {
             match runs.last_mut() {
                 Some((p, count)) if *p == pair => *count += 1,
                 _ => runs.push((pair, 1)),
@@ -378,22 +375,26 @@ impl DdmProblem {
             self.spare.push(bucket);
         }
         let dynamic = partition.starts[k] as u32;
-        for (pair, idx) in gamma {
-            if self.groups.last().is_none_or(|g| g.pair != pair) {
-                let r = self.groups.len();
-                let mut bucket = self.spare.pop().unwrap_or_default();
-                bucket.remote = ranks.is_some_and(|(me, _)| owner[r] != me);
-                self.groups.push(InterfaceGroup {
-                    pair,
-                    colour: colour[r],
-                    owner: owner[r],
-                    bucket,
-                    bodies: Vec::new(),
-                });
+        for (r, &(pair, _)) in runs.iter().enumerate() {
+            let mut bucket = self.spare.pop().unwrap_or_default();
+            bucket.remote = ranks.is_some_and(|(me, _)| owner[r] != me);
+            self.groups.push(InterfaceGroup {
+                pair,
+                colour: colour[r],
+                owner: owner[r],
+                bucket,
+                bodies: Vec::new(),
+            });
+        }
+        // Each Γ contact's group (in pair order here), and the bodies each group shares.
+        let mut g = 0;
+        for &(pair, idx) in gamma.iter() {
+            while self.groups[g].pair != pair {
+                g += 1;
             }
-            let group = self.groups.last_mut().expect("pushed above");
-            group.bucket.push(|| renumber(idx), idx);
+            self.slot[idx as usize] = ((k + g) as u32, 0);
             if ranks.is_some() {
+                let group = &mut self.groups[g];
                 let (b1, b2) = bodies_of(idx as usize);
                 for b in [b1, b2].map(|b| partition.new_index[b as usize]) {
                     if b < dynamic {
@@ -408,8 +409,55 @@ impl DdmProblem {
                 g.bodies.dedup();
             }
         }
-        self.groups.sort_by_key(|g| (g.colour, g.pair));
         self.colours = colours;
+    }
+
+    /// The rank whose bucket contact `idx` is in, after [`DdmProblem::plan`] over `size`
+    /// ranks.
+    pub(crate) fn planned_owner(&self, idx: usize, size: usize) -> usize {
+        let k = self.members.len();
+        match self.slot[idx].0 as usize {
+            s if s < k => exchange::owner(s, k, size),
+            g => self.groups[g - k].owner,
+        }
+    }
+
+    /// The second half of [`DdmProblem::rebuild_with`]: the buckets filled, `make(k)`
+    /// building the local problems of this rank's.
+    pub(crate) fn fill(
+        &mut self,
+        partition: &Partition,
+        make: impl Fn(usize) -> LocalProblem + Sync,
+        ranks: Option<(usize, usize)>,
+    ) {
+        let k = partition.count();
+        let ranks = ranks.filter(|&(_, size)| size > 1);
+        let remote_sub =
+            |s: usize| ranks.is_some_and(|(me, size)| exchange::owner(s, k, size) != me);
+        let renumber = |idx: u32| {
+            let mut l = make(idx as usize);
+            l.body1 = partition.new_index[l.body1 as usize];
+            l.body2 = partition.new_index[l.body2 as usize];
+            l
+        };
+        self.sub.resize_with(k, Bucket::default);
+        self.sub
+            .par_iter_mut()
+            .zip(self.members.par_iter())
+            .enumerate()
+            .for_each(|(s, (bucket, members))| {
+                bucket.clear();
+                if remote_sub(s) {
+                    bucket.fill_remote(members);
+                } else {
+                    bucket.fill(members, renumber);
+                }
+            });
+        for &(_, idx) in &self.gamma {
+            let g = self.slot[idx as usize].0 as usize - k;
+            self.groups[g].bucket.push(|| renumber(idx), idx);
+        }
+        self.groups.sort_by_key(|g| (g.colour, g.pair));
         for (gi, g) in self.groups.iter().enumerate() {
             for (place, &idx) in g.bucket.origin.iter().enumerate() {
                 self.slot[idx as usize] = ((k + gi) as u32, place as u32);
@@ -982,7 +1030,7 @@ impl<'a> Ranks<'a> {
             }
             for (l, st) in b.locals.iter().zip(&b.status) {
                 self.values
-                    .extend_from_slice(&[l.r.x, l.r.y, l.r.z, status_code(*st)]);
+                    .extend_from_slice(&[l.r.x, l.r.y, l.r.z, st.code()]);
             }
         }
         exchange::share(self.ex, &units, &mut [], &mut self.values, &mut self.buf);
@@ -997,27 +1045,11 @@ impl<'a> Ranks<'a> {
             for st in b.status.iter_mut() {
                 let x = &self.values[at..at + LEN];
                 b.remote_impulse.push(DVec3::new(x[0], x[1], x[2]));
-                *st = status_from_code(x[3]);
+                *st = ContactStatus::from_code(x[3]);
                 at += LEN;
             }
         }
         self.seconds += t.elapsed().as_secs_f64();
-    }
-}
-
-fn status_code(s: ContactStatus) -> f64 {
-    match s {
-        ContactStatus::NoContact => 0.0,
-        ContactStatus::Stick => 1.0,
-        ContactStatus::Slide => 2.0,
-    }
-}
-
-fn status_from_code(x: f64) -> ContactStatus {
-    match x as u8 {
-        1 => ContactStatus::Stick,
-        2 => ContactStatus::Slide,
-        _ => ContactStatus::NoContact,
     }
 }
 
@@ -1119,6 +1151,14 @@ pub(crate) enum Contacts<'a> {
         impulse: &'a mut [DVec3],
         status: &'a mut [ContactStatus],
     },
+    /// Built into their buckets by [`DdmWorkspace::plan`] and [`DdmWorkspace::fill`] from the
+    /// contacts this rank holds, the `global[i]`-th of the step's for its `i`-th: impulses
+    /// and statuses written to `impulse` and `status` (one per contact held).
+    Held {
+        impulse: &'a mut [DVec3],
+        status: &'a mut [ContactStatus],
+        global: &'a [u32],
+    },
 }
 
 impl DdmWorkspace {
@@ -1128,16 +1168,53 @@ impl DdmWorkspace {
         self.problem.buckets().map(|b| b.locals.len()).sum()
     }
 
-    /// Which rank holds each body pair after the last solve over `partition`, on `size`
-    /// ranks (see [`exchange::PairOwners`]).
-    pub(crate) fn pair_owners(&self, partition: &Partition, size: usize) -> exchange::PairOwners {
+    /// Which rank holds each body pair after the last solve (or plan) over `partition`, on
+    /// `size` ranks (see [`exchange::PairOwners`]; `attach` as there).
+    pub(crate) fn pair_owners(
+        &self,
+        partition: &Partition,
+        size: usize,
+        attach: &[u32],
+    ) -> exchange::PairOwners {
         let groups = self
             .problem
             .groups
             .iter()
             .map(|g| (g.pair, g.owner))
             .collect();
-        exchange::PairOwners::new(partition, groups, size)
+        exchange::PairOwners::new(partition, groups, size, attach)
+    }
+
+    /// Buckets the step's `n` contacts (contact `k` joins `bodies_of(k)`) by `partition`
+    /// without building any local problem: afterwards [`DdmWorkspace::planned_owner`] says
+    /// which rank solves each, and [`DdmWorkspace::fill`] builds them.
+    pub(crate) fn plan(
+        &mut self,
+        partition: &Partition,
+        n: usize,
+        bodies_of: impl Fn(usize) -> (u32, u32) + Sync,
+        parallel_interface: bool,
+    ) {
+        let ranks = self.exchange.as_ref().map(|e| (e.rank(), e.size()));
+        self.problem
+            .plan(partition, n, bodies_of, parallel_interface, ranks);
+    }
+
+    /// The rank that solves contact `k` of the last [`DdmWorkspace::plan`].
+    pub(crate) fn planned_owner(&self, k: usize) -> usize {
+        let size = self.exchange.as_ref().map_or(1, |e| e.size());
+        self.problem.planned_owner(k, size)
+    }
+
+    /// Builds the local problems of this rank's buckets of the last [`DdmWorkspace::plan`],
+    /// contact `k`'s by `make(k)`, for [`solve_contacts`] with [`Contacts::Held`].
+    pub(crate) fn fill(
+        &mut self,
+        partition: &Partition,
+        make: impl Fn(usize) -> LocalProblem + Sync,
+    ) {
+        let ranks = self.exchange.as_ref().map(|e| (e.rank(), e.size()));
+        self.problem.fill(partition, make, ranks);
     }
 
     /// Builds the local problems of `builder`'s contacts straight into the buckets of
@@ -1195,7 +1272,9 @@ pub(crate) fn solve_contacts(
             assert!(p.slot.len() == impulse.len() && status.len() == impulse.len());
             impulse.len()
         }
+        Contacts::Held { .. } => p.slot.len(),
     };
+    let held = matches!(contacts, Contacts::Held { .. });
     let starts = &partition.starts;
     let mut report = SolveReport::default();
 
@@ -1355,10 +1434,13 @@ pub(crate) fn solve_contacts(
         d.impulse_v = w.impulse_v;
         d.impulse_w = w.impulse_w;
     }
-    // Every rank gets every body and every contact's impulse: the scene stays the same.
+    // Every rank gets every body, and every contact's impulse unless each rank holds its
+    // own contacts: the scene stays the same.
     if let Some(r) = ranks.as_mut() {
         r.share_subdomains(pb, &mut vec![(); p.sub.len()], true);
-        r.share_impulses(p);
+        if !held {
+            r.share_impulses(p);
+        }
     }
 
     // 3. Back to the caller's numbering, in parallel over the caller's bodies and contacts.
@@ -1386,6 +1468,15 @@ pub(crate) fn solve_contacts(
             .with_min_len(1024)
             .zip(status.par_iter_mut().zip(slot))
             .for_each(|(r, x)| *r = solved(x)),
+        Contacts::Held {
+            impulse,
+            status,
+            global,
+        } => impulse
+            .par_iter_mut()
+            .with_min_len(1024)
+            .zip(status.par_iter_mut().zip(global.par_iter()))
+            .for_each(|(r, (st, &g))| *r = solved((st, &p.slot[g as usize]))),
     }
     drop(buckets);
 
@@ -1667,7 +1758,7 @@ mod tests {
                 parallel_interface,
                 Some((0, size)),
             );
-            let owners = ws.pair_owners(&partition, size);
+            let owners = ws.pair_owners(&partition, size, &[]);
             let k = partition.count();
             for (c, &(a, b)) in pairs.iter().enumerate() {
                 let (bucket, _) = ws.problem.slot[c];

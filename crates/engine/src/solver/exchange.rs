@@ -1,17 +1,21 @@
 //! The domain decomposition across processes (MPI ranks): what a DDM solve shares, and with
 //! whom.
 //!
-//! Every process holds the whole scene and steps it the same way; the DDM solve
-//! ([`super::ddm`]) is what they split. Rank `r` builds the local problems of the
-//! subdomains it owns ([`owner`]: contiguous blocks of subdomains, a rule of the partition
-//! alone) and of its share of the interface groups (balanced colour by colour) and no others,
-//! warm-starts and sweeps them, and after each phase the ranks share what the phase wrote that another rank reads next: the velocities of
-//! the bodies the interface contacts and the drives touch, each bucket's sums for the stop
-//! test, and once a step each contact's share of the residual's scale. At the end of the solve every rank
-//! receives every body's velocities and every contact's impulse, so the scene stays the same
-//! on every process. Sharing copies values: each bucket is swept with the same arithmetic in
-//! the same order as in one process, so a run over K ranks is bit-identical to a
-//! shared-memory run with the same partition.
+//! Every process holds every body and steps it the same way; the contacts and the DDM solve
+//! ([`super::ddm`]) are what they split. Rank `r` owns the subdomains [`owner`] gives it
+//! (contiguous blocks of subdomains, a rule of the partition alone) and its share of the
+//! interface groups (balanced colour by colour), and *holds* their pairs (`PairOwners`):
+//! it alone tests them, keeps their manifolds and contacts, warm-starts, builds and sweeps
+//! them. Once a step the ranks share each pair's contact count (the skeleton every rank
+//! partitions and buckets by), and the pairs whose bucket changes rank move to the new owner
+//! with their manifold and contacts. After each phase of the solve the ranks share what the
+//! phase wrote that another rank reads next: the velocities of the bodies the interface
+//! contacts and the drives touch, each bucket's sums for the stop test, and once a step each
+//! contact's share of the residual's scale. At the end of the solve every rank receives
+//! every body's velocities, so the bodies stay the same on every process. Sharing copies
+//! values: each bucket is swept with the same arithmetic in the same order as in one
+//! process, so a run over K ranks is bit-identical to a shared-memory run with the same
+//! partition.
 //!
 //! The engine needs no MPI library: [`Exchange`] is the one collective it calls (an
 //! all-gather of `f64`s); the command line implements it over MPI (the `mpi` feature), and
@@ -32,6 +36,18 @@ pub trait Exchange: Send + Sync + std::fmt::Debug {
     /// All-gather: each rank gives `mine` (`counts[rank]` values); `all` (`Σ counts` values)
     /// receives every rank's values, rank after rank.
     fn all_gather(&self, mine: &[f64], counts: &[usize], all: &mut [f64]);
+}
+
+/// All-gather of a different number of values per rank: every rank's `mine`, rank after
+/// rank, and how many each gave (two collectives: the counts, then the values).
+pub(crate) fn gather_varying(ex: &dyn Exchange, mine: &[f64]) -> (Vec<f64>, Vec<usize>) {
+    let size = ex.size();
+    let mut counts = vec![0.0; size];
+    ex.all_gather(&[mine.len() as f64], &vec![1; size], &mut counts);
+    let counts: Vec<usize> = counts.iter().map(|&c| c as usize).collect();
+    let mut all = vec![0.0; counts.iter().sum()];
+    ex.all_gather(mine, &counts, &mut all);
+    (all, counts)
 }
 
 /// The rank that owns subdomain `s` of `n` over `size` ranks: contiguous blocks of
@@ -61,16 +77,25 @@ pub(crate) struct PairOwners {
 
 impl PairOwners {
     /// The owners of the solve over `partition` whose interface groups had `groups` (subdomain
-    /// pair, rank), over `size` ranks.
+    /// pair, rank), over `size` ranks; a body attached to another (`attach[i]`, empty when
+    /// none is) is solved as that one, in its subdomain.
     pub(crate) fn new(
         partition: &Partition,
         mut groups: Vec<((u32, u32), usize)>,
         size: usize,
+        attach: &[u32],
     ) -> Self {
         groups.sort_unstable();
         let sequential = groups.first().is_some_and(|g| g.0 .0 == STATIC);
+        let subdomain = match attach.is_empty() {
+            true => partition.subdomain.clone(),
+            false => attach
+                .iter()
+                .map(|&p| partition.subdomain[p as usize])
+                .collect(),
+        };
         PairOwners {
-            subdomain: partition.subdomain.clone(),
+            subdomain,
             count: partition.count(),
             size,
             groups,

@@ -112,27 +112,28 @@ fn trailing_checksum(bytes: &[u8]) -> u64 {
     u64::from_le_bytes(s)
 }
 
-/// Rank `rank`'s part of the checkpoint of `world`: the bodies and contacts `owners` gives it.
+/// Rank `rank`'s part of the checkpoint of `world`: the bodies `owners` gives it and the
+/// contacts it holds.
 fn encode_part(world: &World, owners: &Owners, rank: usize) -> Vec<u8> {
     let (b, c) = (&world.bodies, &world.contacts);
     let bodies: Vec<usize> = (0..b.len()).filter(|&i| owners.body[i] == rank).collect();
-    let contacts: Vec<usize> = (0..c.len())
-        .filter(|&k| owners.contact(world, k) == rank)
-        .collect();
+    let contacts: Vec<usize> = (0..c.len()).filter(|&k| world.holds_contact(k)).collect();
     let mut p = Enc::framed(PART_MAGIC);
     p.u64(super::scene_fingerprint(world));
     p.u64(world.step_index);
     p.u32(rank as u32);
     p.u32(world.ranks() as u32);
     p.len(b.len());
-    p.len(c.len());
+    p.len(world.contact_total());
 
     p.len(bodies.len());
     bodies.iter().for_each(|&i| p.u32(i as u32));
     encode_bodies(&mut p, world, bodies.iter().copied());
     encode_anchors(&mut p, world, bodies.iter().copied());
     p.len(contacts.len());
-    contacts.iter().for_each(|&k| p.u32(k as u32));
+    contacts
+        .iter()
+        .for_each(|&k| p.u32(world.contact_index(k) as u32));
     encode_contacts(&mut p, c, contacts.iter().copied());
     p.finish_frame()
 }
