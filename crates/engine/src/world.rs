@@ -772,8 +772,10 @@ impl World {
             self.local_builder().build_all(&mut locals);
             self.scratch.locals = locals;
         } else {
-            // Nothing stale for `local_problems` to show.
-            self.scratch.locals.clear();
+            // Nothing stale for `local_problems` to show, and no capacity kept: the solver
+            // builds them in its buckets, and a first step prepared by `World::detect` would
+            // otherwise leave a second copy of every local problem here for the whole run.
+            self.scratch.locals = Vec::new();
         }
         times.nlgs += lap.lap();
         (max_penetration, times)
