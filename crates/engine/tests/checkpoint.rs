@@ -217,6 +217,8 @@ fn round_trip_preserves_every_field() {
 
     let path = tmp("round_trip").join("c.bin");
     write_checkpoint_with_stats(&original, Some(&stats), &path).unwrap();
+    // Streamed to its file, the checkpoint is the bytes encoded in memory.
+    assert!(std::fs::read(&path).unwrap() == encode_checkpoint(&original, Some(&stats)));
     let mut loaded = build(&s);
     let back = read_checkpoint_with_stats(&path, &mut loaded)
         .unwrap()

@@ -95,8 +95,8 @@
 //!
 //! # Files in a run folder
 //!
-//! Checkpoints are named `checkpoint_<step:010>.bin` ([`checkpoint_path`]) and written through
-//! [`write_atomic`] (a `.tmp` file, then a rename), so a crash mid-write leaves the previous
+//! Checkpoints are named `checkpoint_<step:010>.bin` ([`checkpoint_path`]) and written
+//! atomically (a `.tmp` file, synced, then a rename), so a crash mid-write leaves the previous
 //! checkpoints intact and at worst a stray `.tmp` file, which is never read (a resume deletes
 //! it: [`remove_partial_checkpoints`]; a write that fails, on a full disk, deletes its own).
 //! [`newest_valid_checkpoint`] resumes from the newest file that reads back valid, and
@@ -106,7 +106,7 @@ use crate::bodies::BodyKind;
 use crate::contacts::ContactSet;
 use crate::laws::ContactStatus;
 use crate::math::{DQuat, DVec3};
-use crate::output::{write_atomic, RunStats};
+use crate::output::RunStats;
 use crate::shapes::Shape;
 use crate::timing::PhaseTimes;
 use crate::world::World;
@@ -255,18 +255,81 @@ impl Fnv {
 // ---------------------------------------------------------------------------------------------
 // Encoding primitives.
 
-#[derive(Default)]
-struct Enc(Vec<u8>);
+/// An encoder: its bytes kept in memory, only counted, or streamed to a file and hashed on
+/// the way (see [`write_framed`]).
+struct Enc(Sink);
+
+enum Sink {
+    Memory(Vec<u8>),
+    Count(u64),
+    File(FileSink),
+}
+
+/// A file being written through a buffer: its checksum so far, its length, and the first
+/// write error (the encoder's calls cannot fail; the error is returned when it ends).
+struct FileSink {
+    w: std::io::BufWriter<std::fs::File>,
+    hash: Fnv,
+    n: u64,
+    error: Option<std::io::Error>,
+}
+
+impl Default for Enc {
+    fn default() -> Self {
+        Enc(Sink::Memory(Vec::new()))
+    }
+}
 
 impl Enc {
+    /// An encoder appending to `bytes`.
+    fn memory(bytes: Vec<u8>) -> Enc {
+        Enc(Sink::Memory(bytes))
+    }
+    /// The bytes of an encoder in memory.
+    fn bytes(&self) -> &[u8] {
+        match &self.0 {
+            Sink::Memory(v) => v,
+            _ => unreachable!("only an encoder in memory has its bytes"),
+        }
+    }
+    fn into_bytes(self) -> Vec<u8> {
+        match self.0 {
+            Sink::Memory(v) => v,
+            _ => unreachable!("only an encoder in memory has its bytes"),
+        }
+    }
+    /// The number of bytes written so far.
+    fn written(&self) -> u64 {
+        match &self.0 {
+            Sink::Memory(v) => v.len() as u64,
+            Sink::Count(n) => *n,
+            Sink::File(f) => f.n,
+        }
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        match &mut self.0 {
+            Sink::Memory(v) => v.extend_from_slice(bytes),
+            Sink::Count(n) => *n += bytes.len() as u64,
+            Sink::File(f) => {
+                use std::io::Write;
+                f.n += bytes.len() as u64;
+                if f.error.is_none() {
+                    f.hash.write(bytes);
+                    if let Err(e) = f.w.write_all(bytes) {
+                        f.error = Some(e);
+                    }
+                }
+            }
+        }
+    }
     fn u8(&mut self, x: u8) {
-        self.0.push(x);
+        self.write(&[x]);
     }
     fn u32(&mut self, x: u32) {
-        self.0.extend_from_slice(&x.to_le_bytes());
+        self.write(&x.to_le_bytes());
     }
     fn u64(&mut self, x: u64) {
-        self.0.extend_from_slice(&x.to_le_bytes());
+        self.write(&x.to_le_bytes());
     }
     fn len(&mut self, n: usize) {
         self.u64(n as u64);
@@ -281,28 +344,77 @@ impl Enc {
         q.to_array().into_iter().for_each(|x| self.f64(x));
     }
 
-    /// The start of a framed file: magic, version, and the payload's length, written by
-    /// [`Enc::finish_frame`] once the payload follows. The payload is encoded in place: a
-    /// checkpoint at scale is hundreds of megabytes, and a copy into a frame would double the
-    /// run's memory at the moment it writes.
+    /// The start of a framed file in memory: magic, version, and the payload's length,
+    /// written by [`Enc::finish_frame`] once the payload follows (encoded in place, not
+    /// copied into a frame).
     fn framed(magic: &[u8; 11]) -> Enc {
-        let mut e = Enc(Vec::new());
-        e.0.extend_from_slice(magic);
+        let mut e = Enc::default();
+        e.write(magic);
         e.u32(FORMAT_VERSION);
         e.u64(0);
-        debug_assert_eq!(e.0.len(), HEADER_LEN);
+        debug_assert_eq!(e.written(), HEADER_LEN as u64);
         e
     }
 
     /// The framed bytes: the payload's length put in the header, the checksum of all before
     /// it appended.
-    fn finish_frame(mut self) -> Vec<u8> {
-        let n = (self.0.len() - HEADER_LEN) as u64;
-        self.0[HEADER_LEN - 8..HEADER_LEN].copy_from_slice(&n.to_le_bytes());
-        let sum = fnv1a64(&self.0);
-        self.u64(sum);
-        self.0
+    fn finish_frame(self) -> Vec<u8> {
+        let mut v = self.into_bytes();
+        let n = (v.len() - HEADER_LEN) as u64;
+        v[HEADER_LEN - 8..HEADER_LEN].copy_from_slice(&n.to_le_bytes());
+        let sum = fnv1a64(&v);
+        v.extend_from_slice(&sum.to_le_bytes());
+        v
     }
+}
+
+/// Writes at `path` the framed file (the bytes [`Enc::framed`] and [`Enc::finish_frame`]
+/// make) whose payload `encode` writes, without holding it in memory — a checkpoint at scale
+/// is hundreds of megabytes: a first pass only counts the payload's bytes for the header, the
+/// second streams them to the file, hashing on the way. Atomic and durable: a temporary file,
+/// synced, renamed into place, the folder synced. Returns the file's checksum.
+fn write_framed(path: &Path, magic: &[u8; 11], encode: impl Fn(&mut Enc)) -> std::io::Result<u64> {
+    let mut count = Enc(Sink::Count(0));
+    encode(&mut count);
+    let n = count.written();
+    let tmp = path.with_extension("tmp");
+    let written = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut e = Enc(Sink::File(FileSink {
+            w: std::io::BufWriter::with_capacity(1 << 20, file),
+            hash: Fnv::new(),
+            n: 0,
+            error: None,
+        }));
+        e.write(magic);
+        e.u32(FORMAT_VERSION);
+        e.u64(n);
+        encode(&mut e);
+        let Sink::File(mut f) = e.0 else {
+            unreachable!("a file encoder")
+        };
+        if let Some(error) = f.error.take() {
+            return Err(error);
+        }
+        if f.n != HEADER_LEN as u64 + n {
+            return Err(std::io::Error::other(
+                "the checkpoint's two encoding passes differ in length",
+            ));
+        }
+        let sum = f.hash.0;
+        use std::io::Write;
+        f.w.write_all(&sum.to_le_bytes())?;
+        let file = f.w.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)?;
+        Ok(sum)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    let sum = written?;
+    sync_folder(path);
+    Ok(sum)
 }
 
 /// Bounds-checked reader; errors name the field and the byte offset.
@@ -484,7 +596,7 @@ impl Scene {
 
     fn encode(&self, e: &mut Enc) {
         e.len(self.settings_json.len());
-        e.0.extend_from_slice(self.settings_json.as_bytes());
+        e.write(self.settings_json.as_bytes());
         e.len(self.bodies.len());
         for r in &self.bodies {
             e.u8(r.kind);
@@ -661,7 +773,7 @@ fn settings_difference(ckpt: &str, world: &str) -> String {
 pub fn scene_fingerprint(world: &World) -> u64 {
     let mut e = Enc::default();
     Scene::of(world).encode(&mut e);
-    fnv1a64(&e.0)
+    fnv1a64(e.bytes())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -683,15 +795,45 @@ pub fn encode_checkpoint(world: &World, stats: Option<&RunStats>) -> Vec<u8> {
 /// The checkpoint of `world` whose bodies, contacts and anchors are in the parts of checksums
 /// `parts` (none: in the file).
 fn encode_manifest(world: &World, stats: Option<&RunStats>, parts: &[u64]) -> Vec<u8> {
+    let scene = encode_scene(world);
+    let mut p = Enc::framed(MAGIC);
+    encode_manifest_payload(&mut p, world, stats, parts, &scene);
+    p.finish_frame()
+}
+
+/// The scene section of a checkpoint (see [`Scene`]), encoded.
+fn encode_scene(world: &World) -> Vec<u8> {
     let mut scene = Enc::default();
     Scene::of(world).encode(&mut scene);
+    scene.into_bytes()
+}
 
-    let mut p = Enc::framed(MAGIC);
-    p.u64(fnv1a64(&scene.0));
-    p.0.extend_from_slice(&scene.0);
-    drop(scene);
-    encode_state_with(&mut p, world, stats, parts);
-    p.finish_frame()
+/// A checkpoint's payload: the scene's checksum and bytes (`scene`), then the state.
+fn encode_manifest_payload(
+    p: &mut Enc,
+    world: &World,
+    stats: Option<&RunStats>,
+    parts: &[u64],
+    scene: &[u8],
+) {
+    p.u64(fnv1a64(scene));
+    p.write(scene);
+    encode_state_with(p, world, stats, parts);
+}
+
+/// Writes the checkpoint of `world` whose bodies, contacts and anchors are in the parts of
+/// checksums `parts` (none: in the file) at `path`, streamed (see [`write_framed`]).
+fn write_manifest(
+    world: &World,
+    stats: Option<&RunStats>,
+    parts: &[u64],
+    path: &Path,
+) -> std::io::Result<()> {
+    let scene = encode_scene(world);
+    write_framed(path, MAGIC, |p| {
+        encode_manifest_payload(p, world, stats, parts, &scene)
+    })
+    .map(|_| ())
 }
 
 /// The state section of a checkpoint: clock, timers, body states, contacts, detection
@@ -799,8 +941,9 @@ fn encode_tail(p: &mut Enc, world: &World, stats: Option<&RunStats>) {
     }
 }
 
-/// Writes the checkpoint of `world` to `path` atomically (temporary file, then rename; see
-/// [`write_atomic`]), so a crash mid-write leaves any previous file at `path` intact.
+/// Writes the checkpoint of `world` to `path` atomically (temporary file, synced, then
+/// renamed), so a crash mid-write leaves any previous file at `path` intact; streamed, never
+/// held whole in memory.
 pub fn write_checkpoint(world: &World, path: &Path) -> std::io::Result<()> {
     write_checkpoint_with_stats(world, None, path)
 }
@@ -812,14 +955,13 @@ pub fn write_checkpoint_with_stats(
     stats: Option<&RunStats>,
     path: &Path,
 ) -> std::io::Result<()> {
-    write_durably(path, &encode_checkpoint(world, stats))
+    write_manifest(world, stats, &[], path)
 }
 
-/// [`write_atomic`], then the rename itself made durable, so that after a power cut the folder
-/// does not still name the previous (possibly pruned) file. Best effort: not every platform
-/// can sync a folder, and the data is already safe.
-fn write_durably(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    write_atomic(path, bytes)?;
+/// Makes the rename of a file into `path`'s folder durable, so that after a power cut the
+/// folder does not still name the previous (possibly pruned) file. Best effort: not every
+/// platform can sync a folder, and the data is already safe.
+fn sync_folder(path: &Path) {
     #[cfg(unix)]
     if let Some(dir) = path.parent() {
         let dir = if dir.as_os_str().is_empty() {
@@ -831,7 +973,6 @@ fn write_durably(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
             let _ = d.sync_all();
         }
     }
-    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1090,7 +1231,7 @@ fn encode_timers(e: &mut Enc, t: &PhaseTimes) {
     e.len(fields.len());
     for (k, x) in fields {
         e.len(k.len());
-        e.0.extend_from_slice(k.as_bytes());
+        e.write(k.as_bytes());
         e.f64(x);
     }
 }
@@ -1241,10 +1382,11 @@ impl Snapshot {
 
     /// [`Snapshot::take`] into this snapshot, reusing its memory (one step to the next).
     pub fn retake(&mut self, world: &World, stats: Option<&RunStats>) {
-        let mut e = Enc(std::mem::take(&mut self.bytes));
-        e.0.clear();
+        let mut bytes = std::mem::take(&mut self.bytes);
+        bytes.clear();
+        let mut e = Enc::memory(bytes);
         encode_state(&mut e, world, stats);
-        self.bytes = e.0;
+        self.bytes = e.into_bytes();
     }
 
     /// Puts `world` back to the state taken (stepping on then gives bit-identically what it

@@ -77,11 +77,13 @@ pub fn write_checkpoint_on_ranks(
         return super::write_checkpoint_with_stats(world, stats, path);
     }
     let rank = world.rank();
-    let part = encode_part(world, &Owners::of(world, ranks), rank);
-    let sum = trailing_checksum(&part);
+    let owners = Owners::of(world, ranks);
     let part_file = part_path(path, rank);
-    let written = super::write_durably(&part_file, &part)
-        .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", part_file.display())));
+    let written = super::write_framed(&part_file, PART_MAGIC, |p| {
+        encode_part(p, world, &owners, rank)
+    })
+    .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", part_file.display())));
+    let sum = *written.as_ref().unwrap_or(&0);
     let mine = [
         f64::from(u8::from(written.is_ok())),
         (sum >> 32) as f64,
@@ -100,7 +102,7 @@ pub fn write_checkpoint_on_ranks(
         let sums: Vec<u64> = (0..ranks)
             .map(|r| ((all[3 * r + 1] as u64) << 32) | all[3 * r + 2] as u64)
             .collect();
-        super::write_durably(path, &super::encode_manifest(world, stats, &sums))?;
+        super::write_manifest(world, stats, &sums, path)?;
     }
     Ok(())
 }
@@ -114,11 +116,10 @@ fn trailing_checksum(bytes: &[u8]) -> u64 {
 
 /// Rank `rank`'s part of the checkpoint of `world`: the bodies `owners` gives it and the
 /// contacts it holds.
-fn encode_part(world: &World, owners: &Owners, rank: usize) -> Vec<u8> {
+fn encode_part(p: &mut Enc, world: &World, owners: &Owners, rank: usize) {
     let (b, c) = (&world.bodies, &world.contacts);
     let bodies: Vec<usize> = (0..b.len()).filter(|&i| owners.body[i] == rank).collect();
     let contacts: Vec<usize> = (0..c.len()).filter(|&k| world.holds_contact(k)).collect();
-    let mut p = Enc::framed(PART_MAGIC);
     p.u64(super::scene_fingerprint(world));
     p.u64(world.step_index);
     p.u32(rank as u32);
@@ -128,14 +129,13 @@ fn encode_part(world: &World, owners: &Owners, rank: usize) -> Vec<u8> {
 
     p.len(bodies.len());
     bodies.iter().for_each(|&i| p.u32(i as u32));
-    encode_bodies(&mut p, world, bodies.iter().copied());
-    encode_anchors(&mut p, world, bodies.iter().copied());
+    encode_bodies(p, world, bodies.iter().copied());
+    encode_anchors(p, world, bodies.iter().copied());
     p.len(contacts.len());
     contacts
         .iter()
         .for_each(|&k| p.u32(world.contact_index(k) as u32));
-    encode_contacts(&mut p, c, contacts.iter().copied());
-    p.finish_frame()
+    encode_contacts(p, c, contacts.iter().copied());
 }
 
 /// Reads the parts `spec` names next to the manifest `manifest` (of scene fingerprint
