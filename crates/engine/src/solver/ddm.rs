@@ -144,7 +144,7 @@ pub struct DdmTimes {
 ///
 /// In a solve distributed over ranks, a bucket another rank owns is *remote*: its local
 /// problems are not built here (`locals` stays empty; `origin` and `status` list its
-/// contacts), and its impulses arrive from the owner at the end of the solve.
+/// contacts), and its contacts are held by its owner.
 #[derive(Clone, Debug, Default)]
 pub struct Bucket {
     /// The local problems (empty when the bucket is remote).
@@ -160,8 +160,6 @@ pub struct Bucket {
     hot: Vec<u32>,
     /// Whether another rank owns this bucket (see above).
     pub remote: bool,
-    /// A remote bucket's impulses, as its owner solved them.
-    remote_impulse: Vec<DVec3>,
 }
 
 impl Bucket {
@@ -197,7 +195,6 @@ impl Bucket {
         self.terms.clear();
         self.hot.clear();
         self.remote = false;
-        self.remote_impulse.clear();
     }
 
     /// Number of contacts.
@@ -210,13 +207,9 @@ impl Bucket {
         self.origin.is_empty()
     }
 
-    /// Contact `k`'s impulse after the solve.
+    /// Contact `k`'s impulse after the solve (a bucket of this rank's).
     fn impulse(&self, k: usize) -> DVec3 {
-        if self.remote {
-            self.remote_impulse[k]
-        } else {
-            self.locals[k].r
-        }
+        self.locals[k].r
     }
 }
 
@@ -999,58 +992,6 @@ impl<'a> Ranks<'a> {
         exchange::share(self.ex, &units, &mut [], terms, &mut self.buf);
         self.seconds += t.elapsed().as_secs_f64();
     }
-
-    /// Every contact's impulse and status, from its bucket's owner (a remote bucket's
-    /// impulses into [`Bucket::remote_impulse`]).
-    fn share_impulses(&mut self, p: &mut DdmProblem) {
-        let t = Instant::now();
-        const LEN: usize = 4;
-        let me = self.ex.rank();
-        let owners: Vec<usize> = self
-            .sub_owner
-            .iter()
-            .chain(&self.group_owner)
-            .copied()
-            .collect();
-        let units: Vec<Unit> = p
-            .buckets()
-            .zip(&owners)
-            .map(|(b, &owner)| Unit {
-                owner,
-                bodies: &[],
-                values: LEN * b.len(),
-            })
-            .collect();
-        self.values.clear();
-        for (b, &owner) in p.buckets().zip(&owners) {
-            if owner != me {
-                let at = self.values.len();
-                self.values.resize(at + LEN * b.len(), 0.0);
-                continue;
-            }
-            for (l, st) in b.locals.iter().zip(&b.status) {
-                self.values
-                    .extend_from_slice(&[l.r.x, l.r.y, l.r.z, st.code()]);
-            }
-        }
-        exchange::share(self.ex, &units, &mut [], &mut self.values, &mut self.buf);
-        drop(units);
-        let mut at = 0;
-        for (b, &owner) in p.buckets_mut().zip(&owners) {
-            if owner == me {
-                at += LEN * b.len();
-                continue;
-            }
-            b.remote_impulse.clear();
-            for st in b.status.iter_mut() {
-                let x = &self.values[at..at + LEN];
-                b.remote_impulse.push(DVec3::new(x[0], x[1], x[2]));
-                *st = ContactStatus::from_code(x[3]);
-                at += LEN;
-            }
-        }
-        self.seconds += t.elapsed().as_secs_f64();
-    }
 }
 
 /// Solves the step's contact problem by Algorithm 1. `locals` and `bodies` are in the
@@ -1104,7 +1045,8 @@ pub struct DdmWorkspace {
     terms: Vec<f64>,
     /// The drives, bodies in solver numbering.
     drives: Vec<DriveRows>,
-    /// The ranks of a run distributed over processes (`None`: this process solves alone).
+    /// The ranks of a run distributed over processes (`None`: this process solves alone);
+    /// such a solve takes the contacts each rank holds, as [`crate::world::World`] steps.
     pub exchange: Option<Arc<dyn Exchange>>,
 }
 
@@ -1274,7 +1216,11 @@ pub(crate) fn solve_contacts(
         }
         Contacts::Held { .. } => p.slot.len(),
     };
-    let held = matches!(contacts, Contacts::Held { .. });
+    // Each rank writes back the contacts it holds, all in its own buckets.
+    assert!(
+        matches!(contacts, Contacts::Held { .. }) || ex.as_ref().is_none_or(|e| e.size() == 1),
+        "a solve shared between ranks takes the contacts each rank holds"
+    );
     let starts = &partition.starts;
     let mut report = SolveReport::default();
 
@@ -1434,13 +1380,9 @@ pub(crate) fn solve_contacts(
         d.impulse_v = w.impulse_v;
         d.impulse_w = w.impulse_w;
     }
-    // Every rank gets every body, and every contact's impulse unless each rank holds its
-    // own contacts: the scene stays the same.
+    // Every rank gets every body: the bodies stay the same on every rank.
     if let Some(r) = ranks.as_mut() {
         r.share_subdomains(pb, &mut vec![(); p.sub.len()], true);
-        if !held {
-            r.share_impulses(p);
-        }
     }
 
     // 3. Back to the caller's numbering, in parallel over the caller's bodies and contacts.
