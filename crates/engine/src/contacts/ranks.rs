@@ -12,6 +12,7 @@
 use super::ContactSet;
 use crate::laws::ContactStatus;
 use crate::math::DVec3;
+use crate::output::shared::gather;
 use crate::solver::exchange::{self, PairOwners};
 use crate::solver::Exchange;
 use crate::world::World;
@@ -89,24 +90,12 @@ impl World {
 
     /// Σ of each rank's `n` (exact: integers). A collective.
     pub fn sum_over_ranks(&self, n: u64) -> u64 {
-        self.over_ranks(n as f64).iter().map(|&x| x as u64).sum()
+        gather(self, &[n as f64]).iter().map(|&x| x as u64).sum()
     }
 
     /// The largest of each rank's `x`. A collective.
     pub fn max_over_ranks(&self, x: f64) -> f64 {
-        self.over_ranks(x).iter().fold(x, |m, &y| m.max(y))
-    }
-
-    /// Each rank's `x`, in rank order.
-    fn over_ranks(&self, x: f64) -> Vec<f64> {
-        match self.exchange().filter(|e| e.size() > 1) {
-            Some(ex) => {
-                let mut all = vec![0.0; ex.size()];
-                ex.all_gather(&[x], &vec![1; ex.size()], &mut all);
-                all
-            }
-            None => vec![x],
-        }
+        gather(self, &[x]).iter().fold(x, |m, &y| m.max(y))
     }
 }
 

@@ -1,7 +1,7 @@
 //! Run outputs: accumulated statistics, `summary.json` and `series.csv`.
 
 pub mod checkpoint;
-mod shared;
+pub(crate) mod shared;
 
 pub mod vtk;
 use crate::digest::state_digest;
