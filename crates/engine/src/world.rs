@@ -18,6 +18,7 @@ use crate::laws::{default_overlap_cap, driven_overlap_cap, Elastic, FrictionTabl
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::LocalBuilder;
+use crate::solver::exchange::PairOwners;
 use crate::solver::partition::SortedAxes;
 use crate::solver::Exchange;
 use crate::solver::{
@@ -478,6 +479,22 @@ impl World {
         )
     }
 
+    /// Who holds each pair at a run's first detection on ranks (no solve has placed the
+    /// pairs yet): the owners of a partition of the current positions, every interface pair
+    /// with its lower subdomain. Close to where the step's solve places them, so that few
+    /// pairs move then (any rule gives the same results: it only decides where a pair is
+    /// tested and kept).
+    fn first_owners(&self) -> PairOwners {
+        let d = self
+            .settings
+            .ddm
+            .as_ref()
+            .expect("a rank holds pairs with [ddm]");
+        let size = self.exchange.as_ref().map_or(1, |e| e.size());
+        let partition = self.partition_from(d, &mut SortedAxes::default());
+        PairOwners::new(&partition, Vec::new(), size, &self.scratch.attach)
+    }
+
     /// The elastic law and the overlap caps (between grains, and of a grain against a body
     /// that is not dynamic) with [`NormalLaw::Overlap`] on compliant contacts (see
     /// [`build_local_problems`]); `None` for the rate form and for rigid contacts.
@@ -537,6 +554,13 @@ impl World {
     /// (temporal coherence, see [`StepSettings::reuse_distance`]), and candidate pairs in all.
     pub fn detection_reuse(&self) -> (usize, usize) {
         self.detector.reuse_counts()
+    }
+
+    /// Bodies whose world geometry the last detection held: every body, except on a rank of
+    /// a domain-decomposed run that holds its own pairs, which places only the bodies they
+    /// may join (its subdomains' and those within reach of them).
+    pub fn detection_bodies(&self) -> usize {
+        self.detector.placed_bodies()
     }
 
     /// The local problems of the step being prepared (after [`World::prepare`] or
@@ -667,6 +691,9 @@ impl World {
         // 1. Detection at qᵢ and warm start (of this rank's pairs only, when each rank of a
         // domain-decomposed run holds its own).
         self.detector.hold = self.holds_pairs();
+        if self.detector.hold && self.detector.owners.is_none() {
+            self.detector.owners = Some(self.first_owners());
+        }
         std::mem::swap(&mut self.scratch.previous, &mut self.contacts);
         self.detector.detect(
             &self.bodies,

@@ -165,9 +165,22 @@ impl Sections {
     pub fn points(&self, world: &World, plane: &Plane) -> Vec<SectionPoint> {
         let b = &world.bodies;
         let h = world.settings.dt;
+        let offset = |i: usize| {
+            let p = b.position[i];
+            match plane.cut {
+                Cut::AlongTrack { y } => (p.y - y, p.x),
+                Cut::AcrossTrack { x } => (p.x - x, p.y),
+            }
+        };
+        let in_slab = |i: usize| self.grains.contains(&i) && offset(i).0.abs() <= SLAB_HALF_WIDTH;
         let mut load = vec![0.0; self.grains.len()];
-        // The loaded contacts, from every rank, in pair order.
-        let c = &world.gather_contacts(|c, k| c.impulse[k].x > 0.0 || c.impulse[k].x.is_nan());
+        // The loaded contacts of the slab's grains, from every rank, in pair order (each
+        // grain's load sums them in a single process's order; the rest of the bed's contacts
+        // stay where they are held).
+        let c = &world.gather_contacts(|c, k| {
+            (c.impulse[k].x > 0.0 || c.impulse[k].x.is_nan())
+                && (in_slab(c.body1[k] as usize) || in_slab(c.body2[k] as usize))
+        });
         for (k, r) in c.impulse.iter().enumerate() {
             if r.x <= 0.0 {
                 continue;
@@ -182,15 +195,11 @@ impl Sections {
         self.grains
             .clone()
             .filter_map(|i| {
-                let p = b.position[i];
-                let (off, u) = match plane.cut {
-                    Cut::AlongTrack { y } => (p.y - y, p.x),
-                    Cut::AcrossTrack { x } => (p.x - x, p.y),
-                };
+                let (off, u) = offset(i);
                 (off.abs() <= SLAB_HALF_WIDTH).then(|| SectionPoint {
                     grain: i,
                     u,
-                    z: p.z,
+                    z: b.position[i].z,
                     speed: b.velocity[i].length(),
                     load: load[i - self.grains.start],
                 })

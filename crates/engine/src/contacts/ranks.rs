@@ -100,6 +100,21 @@ impl World {
 }
 
 impl ContactSet {
+    /// An empty set with room for `n` contacts in every field.
+    fn with_capacity(n: usize) -> Self {
+        ContactSet {
+            body1: Vec::with_capacity(n),
+            body2: Vec::with_capacity(n),
+            point: Vec::with_capacity(n),
+            frame: Vec::with_capacity(n),
+            gap: Vec::with_capacity(n),
+            mu: Vec::with_capacity(n),
+            impulse: Vec::with_capacity(n),
+            status: Vec::with_capacity(n),
+            local_point: Vec::with_capacity(n),
+        }
+    }
+
     /// Appends contact `k` of `from`.
     pub(crate) fn push_from(&mut self, from: &ContactSet, k: usize) {
         self.body1.push(from.body1[k]);
@@ -205,7 +220,8 @@ impl ContactSet {
         let holder: Vec<usize> = (0..self.len())
             .map(|k| owners.of(self.body1[k], self.body2[k]))
             .collect();
-        let mut send = Vec::new();
+        let send_count = holder.iter().filter(|&&h| h != me).count();
+        let mut send = Vec::with_capacity(send_count * (VALUES + 1));
         for (k, &h) in holder.iter().enumerate() {
             if h != me {
                 send.push(h as f64);
@@ -215,7 +231,9 @@ impl ContactSet {
         let t = std::time::Instant::now();
         let (all, _) = exchange::gather_varying(ex, &send);
         let seconds = t.elapsed().as_secs_f64();
-        let mut arrived = ContactSet::default();
+        let mine = |x: &&[f64]| x[0] as usize == me;
+        let mut arrived =
+            ContactSet::with_capacity(all.chunks_exact(VALUES + 1).filter(mine).count());
         for x in all.chunks_exact(VALUES + 1) {
             if x[0] as usize == me {
                 take(&x[1..], &mut arrived);
@@ -228,20 +246,41 @@ impl ContactSet {
         // pair's points in their order.
         let mut order: Vec<usize> = (0..arrived.len()).collect();
         order.sort_by_key(|&k| key_of(&arrived, k));
-        let mut merged = ContactSet::default();
+        // Where each contact of the merged set comes from: (arrived, index).
+        let mut plan: Vec<(bool, u32)> =
+            Vec::with_capacity(self.len() - send_count + arrived.len());
         let mut a = order.iter().peekable();
         for k in (0..self.len()).filter(|&k| holder[k] == me) {
             while let Some(&&j) = a.peek() {
                 if key_of(&arrived, j) >= key_of(self, k) {
                     break;
                 }
-                merged.push_from(&arrived, j);
+                plan.push((true, j as u32));
                 a.next();
             }
-            merged.push_from(self, k);
+            plan.push((false, k as u32));
         }
-        a.for_each(|&j| merged.push_from(&arrived, j));
-        *self = merged;
+        plan.extend(a.map(|&j| (true, j as u32)));
+        // Field after field, so that one field's new copy at most sits beside the set.
+        fn pick<T: Copy>(field: &mut Vec<T>, arrived: &[T], plan: &[(bool, u32)]) {
+            let merged: Vec<T> = plan
+                .iter()
+                .map(|&(new, k)| match new {
+                    true => arrived[k as usize],
+                    false => field[k as usize],
+                })
+                .collect();
+            *field = merged;
+        }
+        pick(&mut self.body1, &arrived.body1, &plan);
+        pick(&mut self.body2, &arrived.body2, &plan);
+        pick(&mut self.point, &arrived.point, &plan);
+        pick(&mut self.frame, &arrived.frame, &plan);
+        pick(&mut self.gap, &arrived.gap, &plan);
+        pick(&mut self.mu, &arrived.mu, &plan);
+        pick(&mut self.impulse, &arrived.impulse, &plan);
+        pick(&mut self.status, &arrived.status, &plan);
+        pick(&mut self.local_point, &arrived.local_point, &plan);
         seconds
     }
 }

@@ -33,8 +33,35 @@ fn extents(aabbs: &[Aabb], candidates: &[u32]) -> Vec<f64> {
         .collect()
 }
 
+/// The bodies of `now` not in `was`, and of `was` not in `now` (both sorted).
+fn changes(was: &[u32], now: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let (mut joined, mut left) = (Vec::new(), Vec::new());
+    let (mut a, mut b) = (was.iter().peekable(), now.iter().peekable());
+    loop {
+        match (a.peek(), b.peek()) {
+            (Some(&&x), Some(&&y)) if x == y => {
+                a.next();
+                b.next();
+            }
+            (Some(&&x), Some(&&y)) if x < y => {
+                left.push(x);
+                a.next();
+            }
+            (_, Some(&&y)) => {
+                joined.push(y);
+                b.next();
+            }
+            (Some(&&x), None) => {
+                left.push(x);
+                a.next();
+            }
+            (None, None) => return (joined, left),
+        }
+    }
+}
+
 /// The median of `values` (the upper one of an even count; they are reordered). Not empty.
-fn median(values: &mut [f64]) -> f64 {
+pub(super) fn median(values: &mut [f64]) -> f64 {
     let mid = values.len() / 2;
     *values.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
 }
@@ -47,6 +74,33 @@ pub struct Aabb {
 }
 
 impl Aabb {
+    /// The box that holds nothing (the identity of [`Aabb::union`]).
+    pub const EMPTY: Aabb = Aabb {
+        min: DVec3::splat(f64::INFINITY),
+        max: DVec3::splat(f64::NEG_INFINITY),
+    };
+
+    /// The smallest box that holds both.
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        Aabb {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+
+    /// The boxes' common part (empty when they do not overlap).
+    pub fn intersection(&self, o: &Aabb) -> Aabb {
+        Aabb {
+            min: self.min.max(o.min),
+            max: self.max.min(o.max),
+        }
+    }
+
+    /// True when the box holds no point.
+    pub fn is_empty(&self) -> bool {
+        !self.min.cmple(self.max).all()
+    }
+
     /// True when the boxes overlap (touching counts).
     #[inline]
     pub fn overlaps(&self, o: &Aabb) -> bool {
@@ -68,6 +122,8 @@ pub(crate) struct BroadPhase {
     skin: f64,
     /// Scratch: which bodies left their enlarged box at this call.
     escaped: Vec<bool>,
+    /// Full passes so far.
+    full_passes: u64,
     entries: Vec<(u32, [i32; 3])>,
     slot_of: Vec<u32>,
     start: Vec<u32>,
@@ -115,10 +171,11 @@ impl BroadPhase {
     /// result is the same set as a full pass (every overlapping pair not skipped, sorted), and
     /// callers cannot tell the two apart. Bodies moving slower than the skin per step leave
     /// their enlarged box once in many steps, so most calls test a few boxes instead of
-    /// hashing them all. Every enlarged box is computed afresh by a full pass on the first
-    /// call, when the candidates differ, when `same_skip` is false (the skip rule changed
-    /// since the last call), or when the escaped boxes times the candidates exceed
-    /// `INCREMENTAL_TESTS` box tests.
+    /// hashing them all. A body that joined the candidates (`candidates` are sorted) is
+    /// entered like an escaped one, and the pairs of a body that left them are dropped. Every
+    /// enlarged box is computed afresh by a full pass on the first call, when `same_skip` is
+    /// false (the skip rule changed since the last call), or when the escaped and joining
+    /// boxes times the candidates exceed `INCREMENTAL_TESTS` box tests.
     pub(crate) fn update_pairs(
         &mut self,
         aabbs: &[Aabb],
@@ -127,16 +184,26 @@ impl BroadPhase {
         same_skip: bool,
         pairs: &mut Vec<(u32, u32)>,
     ) {
-        let comparable =
-            same_skip && self.fat.len() == aabbs.len() && self.fat_candidates == candidates;
+        let comparable = same_skip && self.fat.len() == aabbs.len();
+        let (joined, left) = match comparable && self.fat_candidates != candidates {
+            true => changes(&self.fat_candidates, candidates),
+            false => (Vec::new(), Vec::new()),
+        };
         let escaped: Vec<u32> = if comparable {
             let fat = &self.fat;
-            candidates
+            // A joining body's enlarged box is stale: it is entered again.
+            let mut e: Vec<u32> = candidates
                 .par_iter()
                 .with_min_len(4096)
                 .filter(|&&i| !fat[i as usize].contains(&aabbs[i as usize]))
                 .copied()
-                .collect()
+                .collect();
+            if !joined.is_empty() {
+                e.extend_from_slice(&joined);
+                e.sort_unstable();
+                e.dedup();
+            }
+            e
         } else {
             Vec::new()
         };
@@ -144,6 +211,7 @@ impl BroadPhase {
             let mut e = extents(aabbs, candidates);
             let m = if e.is_empty() { 0.0 } else { median(&mut e) };
             self.skin = SKIN_FRACTION * if m.is_finite() { m } else { 0.0 };
+            self.full_passes += 1;
             let skin = self.skin;
             let mut fat = std::mem::take(&mut self.fat);
             fat.clear();
@@ -154,11 +222,15 @@ impl BroadPhase {
             self.fat_pairs = fat_pairs;
             self.fat_candidates.clear();
             self.fat_candidates.extend_from_slice(candidates);
-        } else if !escaped.is_empty() {
+        } else if !escaped.is_empty() || !left.is_empty() {
+            // Marked: the bodies whose kept pairs are dropped (escaped, joined or left).
             self.escaped.clear();
             self.escaped.resize(aabbs.len(), false);
             for &c in &escaped {
                 self.fat[c as usize] = aabbs[c as usize].grown(self.skin);
+                self.escaped[c as usize] = true;
+            }
+            for &c in &left {
                 self.escaped[c as usize] = true;
             }
             let (fat, is_escaped) = (&self.fat, &self.escaped);
@@ -188,6 +260,8 @@ impl BroadPhase {
                 .collect();
             fresh.par_sort_unstable();
             super::merge_sorted(&kept, &fresh, &mut self.fat_pairs);
+            self.fat_candidates.clear();
+            self.fat_candidates.extend_from_slice(candidates);
         }
         pairs.clear();
         pairs.par_extend(
@@ -432,5 +506,73 @@ mod tests {
             assert_eq!(pairs, brute, "step {step}, {moved} boxes moved");
         }
         assert!(incremental > 20);
+    }
+
+    /// Updating when bodies join and leave the candidates (a rank's detection as its region
+    /// moves) finds the same pairs as brute force over the candidates, incrementally.
+    #[test]
+    fn updated_pairs_follow_the_candidates() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let n = 1500;
+        let mut boxes = random_boxes(&mut rng, n, 0.4, 0.04);
+        let mut bp = BroadPhase::default();
+        let mut pairs = Vec::new();
+        let mut incremental = 0;
+        let mut left_out: Vec<bool> = (0..=n).map(|_| rng.gen_bool(0.3)).collect();
+        for step in 0..30 {
+            // A few bodies join or leave (every body at step 10), a few move.
+            let flips = if step == 10 {
+                0
+            } else {
+                [1, 5, 30, 0][step % 4]
+            };
+            for _ in 0..flips {
+                let k = rng.gen_range(0..=n);
+                left_out[k] = !left_out[k];
+            }
+            if step == 10 {
+                left_out.iter_mut().for_each(|l| *l = false);
+            }
+            for _ in 0..3 {
+                let k = rng.gen_range(0..n);
+                let shift = (DVec3::new(rng.gen(), rng.gen(), rng.gen()) - 0.5) * 0.02;
+                boxes[k] = Aabb {
+                    min: boxes[k].min + shift,
+                    max: boxes[k].max + shift,
+                };
+            }
+            let candidates: Vec<u32> = (0..=n as u32).filter(|&i| !left_out[i as usize]).collect();
+            let (full, changed) = (bp.full_passes, bp.fat_candidates != candidates);
+            bp.update_pairs(&boxes, &candidates, |_, _| false, true, &mut pairs);
+            incremental += usize::from(step > 0 && changed && bp.full_passes == full);
+            let mut brute = Vec::new();
+            for (a, &i) in candidates.iter().enumerate() {
+                for &j in &candidates[a + 1..] {
+                    if boxes[i as usize].overlaps(&boxes[j as usize]) {
+                        brute.push((i, j));
+                    }
+                }
+            }
+            assert_eq!(pairs, brute, "step {step}, {flips} bodies joined or left");
+            assert_eq!(bp.fat_candidates, candidates);
+        }
+        // Every call after the first with new candidates, but for the one where every body
+        // joins and those whose joining bodies make too many box tests.
+        assert!(
+            incremental > 15,
+            "{incremental} incremental calls with new candidates"
+        );
+    }
+
+    /// The bodies that joined and left, between two sorted lists.
+    #[test]
+    fn changes_between_sorted_lists() {
+        assert_eq!(
+            changes(&[1, 3, 5, 9], &[0, 3, 4, 5, 10]),
+            (vec![0, 4, 10], vec![1, 9])
+        );
+        assert_eq!(changes(&[], &[2, 3]), (vec![2, 3], vec![]));
+        assert_eq!(changes(&[2, 3], &[]), (vec![], vec![2, 3]));
+        assert_eq!(changes(&[7], &[7]), (vec![], vec![]));
     }
 }

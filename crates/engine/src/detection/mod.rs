@@ -39,14 +39,21 @@ pub struct RawContact {
     pub gap: f64,
 }
 
-/// World-frame geometry of all polyhedra, refreshed each step.
+/// World-frame geometry of the polyhedra, refreshed each step: of every one, or on a rank that
+/// holds its pairs of those its pairs may join (see [`ranks::bodies_needed`]).
 #[derive(Default, Debug)]
 struct GeometryCache {
     vertices: Vec<DVec3>,
+    /// Body `i`'s vertices are `vertices[vertex_start[i]..vertex_start[i + 1]]` (none when
+    /// it is not placed); the same for its faces.
     vertex_start: Vec<usize>,
     normals: Vec<DVec3>,
     offsets: Vec<f64>,
     face_start: Vec<usize>,
+    /// Each body's vertex and face counts.
+    sizes: Vec<[usize; 2]>,
+    /// The bodies whose geometry the arrays hold.
+    placed: Vec<bool>,
     /// The shapes the layout was computed for (held, so that none of them is freed and its
     /// address reused while compared), and each body's circumradius (∞ for a half-space).
     shapes: Vec<Option<Arc<ConvexPolyhedron>>>,
@@ -82,8 +89,8 @@ pub struct Detector {
     pub(crate) exchange: Option<Arc<dyn Exchange>>,
     /// Seconds the last detection spent sharing between ranks.
     pub(crate) shared_seconds: f64,
-    /// The rank that tests each pair in a distributed run (none before the first solve: the
-    /// pairs are then cut into contiguous shares).
+    /// The rank that tests each pair in a domain-decomposed distributed run (set before its
+    /// first detection, then by each solve).
     pub(crate) owners: Option<PairOwners>,
     /// Whether this rank of a distributed run holds its pairs: it tests and keeps the
     /// outcomes of its own pairs only, and writes only their points (see [`ranks`]); else
@@ -177,6 +184,11 @@ impl Detector {
         self.geometry_stale = true;
     }
 
+    /// Bodies whose world geometry the last detection placed.
+    pub(crate) fn placed_bodies(&self) -> usize {
+        self.cache.placed.iter().filter(|&&p| p).count()
+    }
+
     /// Each body's circumradius (∞ for a half-space), as of the last detection.
     pub(crate) fn radii(&self) -> &[f64] {
         &self.cache.radii
@@ -194,7 +206,7 @@ impl Detector {
         let c = &mut self.cache;
         // A first detection has no layout to compare with (anchors restored from a checkpoint
         // are then kept).
-        let first = c.vertex_start.is_empty();
+        let first = c.sizes.is_empty();
         let n = bodies.len();
         // The same shapes as last time: the same layout (comparing the shared shapes' addresses
         // reads no shape, where recounting their vertices would visit every one).
@@ -222,28 +234,75 @@ impl Detector {
                 .iter()
                 .map(|p| p.as_ref().map_or(f64::INFINITY, |p| p.radius)),
         );
-        let mut changed = c.vertex_start.len() != n + 1;
-        c.vertex_start.resize(n + 1, 0);
-        c.face_start.resize(n + 1, 0);
-        let (mut nv, mut nf) = (0, 0);
-        for i in 0..=n {
-            changed |= c.vertex_start[i] != nv || c.face_start[i] != nf;
-            c.vertex_start[i] = nv;
-            c.face_start[i] = nf;
-            if let Some(Shape::Polyhedron(p)) = bodies.shape.get(i) {
-                nv += p.vertices.len();
-                nf += p.face_normals.len();
-            }
-        }
-        c.vertices.resize(nv, DVec3::ZERO);
-        c.normals.resize(nf, DVec3::ZERO);
-        c.offsets.resize(nf, 0.0);
+        let sizes: Vec<[usize; 2]> = bodies
+            .shape
+            .iter()
+            .map(|s| match s {
+                Shape::Polyhedron(p) => [p.vertices.len(), p.face_normals.len()],
+                Shape::Plane { .. } => [0, 0],
+            })
+            .collect();
+        let changed = sizes != c.sizes;
+        c.sizes = sizes;
         !first && changed
     }
 
-    /// World vertices and face planes of the re-anchored bodies (of every body with `all`), at
-    /// their anchor pose.
-    fn refresh_geometry(&mut self, bodies: &BodySet, all: bool) {
+    /// Places the world geometry of the bodies `active` marks (every body when empty) in the
+    /// flat arrays, keeping what they held of bodies placed before unless `discard` (the
+    /// layout changed); returns the bodies whose geometry is to be computed afresh.
+    fn place(&mut self, active: &[bool], discard: bool) -> Vec<bool> {
+        let c = &mut self.cache;
+        let n = c.sizes.len();
+        let want = |i: usize| active.is_empty() || active[i];
+        if discard {
+            c.placed.clear();
+        }
+        c.placed.resize(n, false);
+        let fresh: Vec<bool> = (0..n).map(|i| want(i) && !c.placed[i]).collect();
+        if c.vertex_start.len() == n + 1 && (0..n).all(|i| want(i) == c.placed[i]) {
+            return fresh;
+        }
+        let (mut vertex_start, mut face_start) =
+            (Vec::with_capacity(n + 1), Vec::with_capacity(n + 1));
+        let (mut nv, mut nf) = (0, 0);
+        for (i, [v, f]) in c.sizes.iter().enumerate() {
+            vertex_start.push(nv);
+            face_start.push(nf);
+            if want(i) {
+                nv += v;
+                nf += f;
+            }
+        }
+        vertex_start.push(nv);
+        face_start.push(nf);
+        let mut vertices = Vec::with_capacity(nv);
+        let mut normals = Vec::with_capacity(nf);
+        let mut offsets = Vec::with_capacity(nf);
+        for (i, &[v, f]) in c.sizes.iter().enumerate().filter(|&(i, _)| want(i)) {
+            if c.placed[i] {
+                let (vs, fs) = (c.vertex_start[i], c.face_start[i]);
+                vertices.extend_from_slice(&c.vertices[vs..vs + v]);
+                normals.extend_from_slice(&c.normals[fs..fs + f]);
+                offsets.extend_from_slice(&c.offsets[fs..fs + f]);
+            } else {
+                vertices.resize(vertices.len() + v, DVec3::ZERO);
+                normals.resize(normals.len() + f, DVec3::ZERO);
+                offsets.resize(offsets.len() + f, 0.0);
+            }
+        }
+        c.vertices = vertices;
+        c.normals = normals;
+        c.offsets = offsets;
+        c.vertex_start = vertex_start;
+        c.face_start = face_start;
+        c.placed = (0..n).map(want).collect();
+        fresh
+    }
+
+    /// World vertices and face planes, at their anchor pose, of the placed bodies (`active`, as
+    /// in [`Detector::place`]) that were re-anchored or are `fresh` (every placed body with
+    /// `all`).
+    fn refresh_geometry(&mut self, bodies: &BodySet, all: bool, active: &[bool], fresh: &[bool]) {
         let c = &mut self.cache;
         let anchors = &self.anchors;
         // Per-body transforms, in parallel over runs of bodies (disjoint, contiguous pieces of
@@ -267,7 +326,8 @@ impl Detector {
                 let range = run(k);
                 let (v0, f0) = (vertex_start[range.start], face_start[range.start]);
                 for i in range {
-                    if !(all || anchors.moved[i]) {
+                    let placed = active.is_empty() || active[i];
+                    if !(placed && (all || anchors.moved[i] || fresh[i])) {
                         continue;
                     }
                     if let Shape::Polyhedron(p) = &bodies.shape[i] {
@@ -284,6 +344,56 @@ impl Detector {
                     }
                 }
             });
+    }
+
+    /// The bodies whose geometry this rank places, when it holds its pairs; empty (every
+    /// body) otherwise. They include every body its pairs may join ([`ranks::bodies_needed`]),
+    /// each with a bound: the cube about its anchor position of half-side its circumradius
+    /// plus its detection box's growth (`0.5 alert + reach(margin)`), which holds its box at
+    /// the anchor pose, widened by a hair for rounding. The last placement is kept while it
+    /// holds every needed body; else the bodies needed with every bound grown by half the
+    /// median half-side (a slack of about a grain's circumradius) are placed, so that a
+    /// placement lasts the many steps bodies take to move that far (a new placement moves
+    /// the flat arrays and makes the broad phase enter the joining bodies).
+    fn bodies_to_place(&self, alert: f64, reach: impl Fn(f64) -> f64 + Sync) -> Vec<bool> {
+        let ex = self.exchange.as_deref().filter(|e| e.size() > 1);
+        let (Some(ex), Some(owners), true) = (ex, self.owners.as_ref(), self.hold) else {
+            return Vec::new();
+        };
+        let (radii, margins, anchors) = (&self.cache.radii, &self.margins, &self.anchors);
+        let half: Vec<f64> = (0..radii.len())
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|i| (radii[i] + 0.5 * alert + reach(margins[i])) * (1.0 + 1e-9) + 1e-9)
+            .collect();
+        let bounds = |grow: f64| -> Vec<Aabb> {
+            half.par_iter()
+                .zip(&anchors.position)
+                .with_min_len(1024)
+                .map(|(&h, &x)| Aabb {
+                    min: x - DVec3::splat(h + grow),
+                    max: x + DVec3::splat(h + grow),
+                })
+                .collect()
+        };
+        let needed = ranks::bodies_needed(owners, ex.rank(), &bounds(0.0));
+        let placed = &self.cache.placed;
+        let held = |needed: &[bool]| {
+            placed.len() == needed.len() && needed.par_iter().zip(placed).all(|(&n, &p)| !n || p)
+        };
+        if needed.is_empty() || held(&needed) {
+            return match needed.is_empty() {
+                true => needed,
+                false => placed.clone(),
+            };
+        }
+        let mut finite: Vec<f64> = half.iter().copied().filter(|h| h.is_finite()).collect();
+        let slack = match finite.is_empty() {
+            true => 0.0,
+            false => 0.5 * broad::median(&mut finite),
+        };
+        // Growing every bound grows every region: a superset of the needed bodies.
+        ranks::bodies_needed(owners, ex.rank(), &bounds(slack))
     }
 
     /// Detects all contact points within the alert distance of touching, appended to `out`
@@ -342,14 +452,18 @@ impl Detector {
             reuse,
             layout_changed,
         );
-        let all = std::mem::take(&mut self.geometry_stale);
-        self.refresh_geometry(bodies, all);
         let reach = |m: f64| if reuse > 0.0 { reuse + m.max(reuse) } else { m };
+        let active = self.bodies_to_place(alert, reach);
+        let fresh = self.place(&active, layout_changed);
+        let all = std::mem::take(&mut self.geometry_stale);
+        self.refresh_geometry(bodies, all, &active, &fresh);
+        let placed = |i: usize| active.is_empty() || active[i];
         let (cache, margins) = (&self.cache, &self.margins);
         (0..n)
             .into_par_iter()
             .with_min_len(256)
             .map(|i| match &bodies.shape[i] {
+                _ if !placed(i) => Aabb::EMPTY,
                 Shape::Polyhedron(_) => {
                     let v = &cache.vertices[cache.vertex_start[i]..cache.vertex_start[i + 1]];
                     let (lo, hi) = v.iter().fold(
@@ -369,7 +483,9 @@ impl Detector {
             })
             .collect_into_vec(&mut self.aabbs);
         let is_plane = |i: usize| matches!(bodies.shape[i], Shape::Plane { .. });
-        let polys: Vec<u32> = (0..n as u32).filter(|&i| !is_plane(i as usize)).collect();
+        let polys: Vec<u32> = (0..n as u32)
+            .filter(|&i| !is_plane(i as usize) && placed(i as usize))
+            .collect();
         let planes: Vec<u32> = (0..n as u32).filter(|&i| is_plane(i as usize)).collect();
         let dynamic = |i: u32| bodies.kind[i as usize] == BodyKind::Dynamic;
         let mut pairs = std::mem::take(&mut self.spare_pairs);
@@ -419,7 +535,11 @@ impl Detector {
         let exchange = self.exchange.clone().filter(|e| e.size() > 1);
         // A rank that holds its pairs keeps only those.
         if let Some(ex) = exchange.as_deref().filter(|_| self.hold) {
-            ranks::keep_own(ex, self.owners.as_ref(), &mut pairs);
+            let owners = self
+                .owners
+                .as_ref()
+                .expect("a rank that holds pairs knows who holds each");
+            ranks::keep_own(ex, owners, &mut pairs);
         }
         // Each pair: last step's outcome (parallel, no serial merge), reused if neither body
         // was re-anchored, else computed at the anchors with its hint.

@@ -1,15 +1,18 @@
 //! The narrow phase of a distributed run (see [`crate::solver::exchange`]). Every rank holds
-//! the same bodies and finds the same candidate pairs. In a domain-decomposed run each rank
-//! keeps the pairs it holds ([`keep_own`]) and tests, reuses and keeps their outcomes only;
-//! the outcomes of pairs that change rank move with them ([`Detector::migrate`]). Without
-//! domain decomposition every rank solves the whole step: the pairs left to test are cut
-//! into one contiguous share per rank, each rank tests its share, and an all-gather gives
-//! every rank every outcome ([`narrow_on_ranks`]). An outcome is the same whichever rank
-//! computes it, so detection is bit-identical to one process.
+//! the same bodies. In a domain-decomposed run each rank places the world geometry of, and
+//! runs the broad phase over, only the bodies its pairs may join ([`bodies_needed`]: its
+//! subdomains' and those within reach of them), keeps the pairs it holds ([`keep_own`]) and
+//! tests, reuses and keeps their outcomes only; the outcomes of pairs that change rank move
+//! with them ([`Detector::migrate`]). Without domain decomposition every rank solves the
+//! whole step: the pairs left to test are cut into one contiguous share per rank, each rank
+//! tests its share, and an all-gather gives every rank every outcome ([`narrow_on_ranks`]).
+//! An outcome is the same whichever rank computes it, so detection is bit-identical to one
+//! process.
 
-use super::{Detector, FaceHint, ManifoldPoint, Outcomes, PairGeometry};
+use super::{Aabb, Detector, FaceHint, ManifoldPoint, Outcomes, PairGeometry};
 use crate::math::DVec3;
 use crate::solver::exchange::PairOwners;
+use crate::solver::partition::STATIC;
 use crate::solver::{exchange, Exchange};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -69,28 +72,59 @@ fn length(x: &[f64]) -> usize {
     }
 }
 
-/// Keeps, of the candidate `pairs` (sorted), those this rank holds: `owners`' rule, or
-/// before the first solve contiguous shares of the list.
-pub(super) fn keep_own(
-    ex: &dyn Exchange,
-    owners: Option<&PairOwners>,
-    pairs: &mut Vec<(u32, u32)>,
-) {
-    let (me, size, n) = (ex.rank(), ex.size(), pairs.len());
-    match owners {
-        Some(o) => {
-            let own: Vec<bool> = pairs.par_iter().map(|&(i, j)| o.of(i, j) == me).collect();
-            let mut k = 0;
-            pairs.retain(|_| {
-                k += 1;
-                own[k - 1]
-            });
-        }
-        None => {
-            pairs.truncate((me + 1) * n / size);
-            pairs.drain(..me * n / size);
+/// Keeps, of the candidate `pairs` (sorted), those this rank holds by `owners`' rule.
+pub(super) fn keep_own(ex: &dyn Exchange, owners: &PairOwners, pairs: &mut Vec<(u32, u32)>) {
+    let me = ex.rank();
+    let own: Vec<bool> = pairs
+        .par_iter()
+        .map(|&(i, j)| owners.of(i, j) == me)
+        .collect();
+    let mut k = 0;
+    pairs.retain(|_| {
+        k += 1;
+        own[k - 1]
+    });
+}
+
+/// The bodies whose pairs this rank (`me`) may hold under `owners`' rule, given each body's
+/// `bound`: a box that holds its detection box (bounds of no body need not be finite). The
+/// rank's regions are the bounds of each subdomain whose own pairs it holds (the union of its
+/// bodies' bounds), and the overlap of the two subdomains' bounds of each interface group it
+/// holds; a body is needed when its bound meets a region, and the bodies of no subdomain
+/// always are. Every pair the rank holds whose detection boxes overlap joins two needed
+/// bodies: within one subdomain both bounds lie in its region; across an interface each
+/// bound lies in its own subdomain's bounds and meets the other's, so it meets their
+/// overlap; a pair across subdomains with no group is held with the lower one, whose region
+/// holds one bound and so meets the other. Empty when every body is (a sequential interface
+/// this rank holds).
+pub(super) fn bodies_needed(owners: &PairOwners, me: usize, bound: &[Aabb]) -> Vec<bool> {
+    let mut extent = vec![Aabb::EMPTY; owners.count()];
+    // A body of NaN bounds has no pair (its boxes overlap none).
+    for (i, b) in bound.iter().enumerate().filter(|(_, b)| !b.is_empty()) {
+        if let Some(e) = extent.get_mut(owners.subdomain(i) as usize) {
+            *e = e.union(b);
         }
     }
+    let mut regions: Vec<Aabb> = (0..owners.count())
+        .filter(|&s| owners.of_subdomain(s) == me)
+        .map(|s| extent[s])
+        .collect();
+    for &((a, b), rank) in owners.groups() {
+        if rank != me {
+            continue;
+        }
+        if a == STATIC {
+            return Vec::new();
+        }
+        regions.push(extent[a as usize].intersection(&extent[b as usize]));
+    }
+    regions.retain(|r| !r.is_empty());
+    bound
+        .par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .map(|(i, b)| owners.subdomain(i) == STATIC || regions.iter().any(|r| r.overlaps(b)))
+        .collect()
 }
 
 impl Detector {
@@ -257,6 +291,102 @@ pub(super) fn narrow_on_ranks(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::solver::partition::{Balance, Partition};
+
+    /// A body's detection box `x ± half` and its bound, a cube about `x` that holds it.
+    fn boxes(x: DVec3, half: DVec3) -> (Aabb, Aabb) {
+        let r = half.length();
+        (
+            Aabb {
+                min: x - half,
+                max: x + half,
+            },
+            Aabb {
+                min: x - DVec3::splat(r),
+                max: x + DVec3::splat(r),
+            },
+        )
+    }
+
+    proptest::proptest! {
+        /// Every pair a rank holds whose detection boxes overlap joins two bodies it needs,
+        /// whatever the partition, the interface groups (held by any rank, or Γ as one
+        /// sequential group) and the number of ranks.
+        #[test]
+        fn a_rank_needs_both_bodies_of_every_pair_it_holds(
+            bodies in proptest::collection::vec(
+                ((0.0f64..4.0, 0.0f64..2.0, 0.0f64..1.0), (0.01f64..0.3, 0.01f64..0.3, 0.01f64..0.3), 0u8..10),
+                8..70,
+            ),
+            dims in proptest::sample::select(vec![[2usize, 1, 1], [4, 1, 1], [3, 2, 1], [2, 2, 2]]),
+            size in 1usize..5,
+            groups in proptest::collection::vec((0u32..16, 0u32..16, 0usize..5), 0..12),
+            sequential in proptest::option::of(0usize..5),
+        ) {
+            let x: Vec<DVec3> = bodies.iter().map(|b| DVec3::new(b.0 .0, b.0 .1, b.0 .2)).collect();
+            // About one body in ten is not dynamic (in no subdomain).
+            let dynamic: Vec<bool> = bodies.iter().map(|b| b.2 > 0).collect();
+            let partition = Partition::build(&x, &dynamic, dims, Balance::Volume, &vec![1.0; x.len()]);
+            let k = partition.count() as u32;
+            let groups: Vec<((u32, u32), usize)> = match sequential {
+                Some(rank) => vec![((STATIC, STATIC), rank % size)],
+                None => {
+                    let mut g: Vec<_> = groups
+                        .iter()
+                        .map(|&(a, b, r)| ((a % k).min(b % k), (a % k).max(b % k), r % size))
+                        .filter(|&(a, b, _)| a != b)
+                        .map(|(a, b, r)| ((a, b), r))
+                        .collect();
+                    g.sort_unstable();
+                    g.dedup_by_key(|g| g.0);
+                    g
+                }
+            };
+            let owners = PairOwners::new(&partition, groups, size, &[]);
+            let (detect, bound): (Vec<Aabb>, Vec<Aabb>) = bodies
+                .iter()
+                .zip(&x)
+                .map(|(b, &x)| boxes(x, DVec3::new(b.1 .0, b.1 .1, b.1 .2)))
+                .unzip();
+            for me in 0..size {
+                let needed = bodies_needed(&owners, me, &bound);
+                let need = |i: usize| needed.is_empty() || needed[i];
+                for i in 0..x.len() {
+                    for j in i + 1..x.len() {
+                        let held = owners.of(i as u32, j as u32) == me;
+                        if held && (dynamic[i] || dynamic[j]) && detect[i].overlaps(&detect[j]) {
+                            proptest::prop_assert!(need(i) && need(j), "rank {} pair {:?}", me, (i, j));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// A rank needs its subdomains' bodies and the bodies within reach of them, not the far
+    /// side of the bed: four slabs over two ranks, grains 0.1 m wide every 0.25 m along x.
+    #[test]
+    fn a_rank_needs_its_slabs_and_their_rim() {
+        let x: Vec<DVec3> = (0..16)
+            .map(|i| DVec3::new(0.125 + 0.25 * i as f64, 0.5, 0.5))
+            .collect();
+        let partition = Partition::build(&x, &[true; 16], [4, 1, 1], Balance::Volume, &[1.0; 16]);
+        let owners = PairOwners::new(&partition, vec![((1, 2), 1)], 2, &[]);
+        let bound: Vec<Aabb> = x.iter().map(|&x| boxes(x, DVec3::splat(0.05)).1).collect();
+        let needed = |me| bodies_needed(&owners, me, &bound);
+        // Rank 0 holds slabs 0 and 1 (grains 0–7); rank 1 slabs 2, 3 and the group between
+        // slabs 1 and 2. Grains are 0.25 m apart, their bounds 0.17 m wide: a slab's bodies'
+        // extent reaches no other slab's grain.
+        let expect0: Vec<bool> = (0..16).map(|i| i < 8).collect();
+        assert_eq!(needed(0), expect0);
+        assert_eq!(needed(1), (0..16).map(|i| i >= 8).collect::<Vec<_>>());
+        // Wider grains (bounds 0.35 m wide) reach their neighbours: each rank needs one more.
+        let bound: Vec<Aabb> = x.iter().map(|&x| boxes(x, DVec3::splat(0.1)).1).collect();
+        let wide = bodies_needed(&owners, 0, &bound);
+        assert_eq!(wide, (0..16).map(|i| i < 9).collect::<Vec<_>>());
+        let wide = bodies_needed(&owners, 1, &bound);
+        assert_eq!(wide, (0..16).map(|i| i >= 7).collect::<Vec<_>>());
+    }
 
     /// An outcome round-trips exactly through its shared values.
     #[test]

@@ -361,7 +361,8 @@ impl DdmProblem {
             }
         }
         let (colour, colours) = colour_groups(&runs, k);
-        let owner = group_owners(&runs, &colour, colours, ranks.map_or(1, |(_, size)| size));
+        let size = ranks.map_or(1, |(_, size)| size);
+        let owner = group_owners(&runs, &colour, colours, k, size);
         for g in self.groups.drain(..) {
             let mut bucket = g.bucket;
             bucket.clear();
@@ -781,36 +782,84 @@ fn colour_groups(runs: &[((u32, u32), usize)], k: usize) -> (Vec<usize>, usize) 
     (colour, colours)
 }
 
-/// The rank that sweeps each of Γ's groups (`runs`, coloured `colour`) over `size` ranks, a
-/// rule of the partition alone: a colour's groups run side by side and every rank waits for
-/// the colour's last, so each colour is balanced by itself — its groups, largest first (ties
-/// by pair), each to the rank with the fewest of the colour's contacts so far, then the
-/// fewest over the colours before, then the lowest. The sequential interface (pair
-/// `(STATIC, STATIC)`) is rank 0's. Any rank may sweep any group: every rank holds the
-/// bodies, and the boundary bodies' velocities are shared before each colour.
+/// The rank that sweeps each of Γ's groups (`runs`, coloured `colour`, between `count`
+/// subdomains) over `size` ranks, a rule of the partition alone. A colour's groups run side
+/// by side and every rank waits for the colour's last, so each colour is balanced by itself:
+/// first each group, in pair order, goes to its own rank (the owner of its lower subdomain)
+/// while that rank's share of the colour stays within the fair share (the colour's contacts
+/// over the ranks, rounded up) plus half the colour's largest group; then the others, largest first (ties by pair), each to the
+/// rank with the fewest of the colour's contacts so far, then the fewest over the colours
+/// before, then the lowest. Should a rank's share then exceed another's by more than the
+/// colour's largest group, the colour is divided by the second rule alone, which keeps
+/// within that bound. A group kept on its own rank joins bodies that rank holds or borders,
+/// and stays there from step to step: a rank then needs the geometry of fewer bodies, the
+/// same ones. The sequential interface (pair `(STATIC, STATIC)`) is rank 0's. Any rank may
+/// sweep any group: every rank holds the bodies, and the boundary bodies' velocities are
+/// shared before each colour.
 fn group_owners(
     runs: &[((u32, u32), usize)],
     colour: &[usize],
     colours: usize,
+    count: usize,
     size: usize,
 ) -> Vec<usize> {
     let mut owner = vec![0; runs.len()];
     let mut total = vec![0; size];
     for c in 0..colours {
-        let mut these: Vec<usize> = (0..runs.len()).filter(|&i| colour[i] == c).collect();
-        these.sort_unstable_by_key(|&i| (std::cmp::Reverse(runs[i].1), runs[i].0));
+        let these: Vec<usize> = (0..runs.len()).filter(|&i| colour[i] == c).collect();
+        if these.iter().any(|&i| runs[i].0 .0 == STATIC) {
+            for &i in &these {
+                owner[i] = 0;
+                total[0] += runs[i].1;
+            }
+            continue;
+        }
+        let largest = these.iter().map(|&i| runs[i].1).max().unwrap_or(0);
+        let fair = these
+            .iter()
+            .map(|&i| runs[i].1)
+            .sum::<usize>()
+            .div_ceil(size)
+            + largest / 2;
+        let mut by_size = these.clone();
+        by_size.sort_unstable_by_key(|&i| (std::cmp::Reverse(runs[i].1), runs[i].0));
+        let least_loaded = |load: &[usize], total: &[usize]| {
+            (0..size)
+                .min_by_key(|&r| (load[r], total[r], r))
+                .expect("at least one rank")
+        };
+        // Own ranks first, within the fair share and half a group; the rest to the least
+        // loaded.
         let mut load = vec![0; size];
-        for i in these {
-            let r = if runs[i].0 .0 == STATIC {
-                0
-            } else {
-                (0..size)
-                    .min_by_key(|&r| (load[r], total[r], r))
-                    .expect("at least one rank")
-            };
+        let mut placed = vec![false; runs.len()];
+        let mut sorted = these.clone();
+        sorted.sort_unstable_by_key(|&i| runs[i].0);
+        for &i in &sorted {
+            let own = exchange::owner(runs[i].0 .0 as usize, count, size);
+            if load[own] + runs[i].1 <= fair {
+                owner[i] = own;
+                load[own] += runs[i].1;
+                placed[i] = true;
+            }
+        }
+        let mut seen = total.clone();
+        for &i in by_size.iter().filter(|&&i| !placed[i]) {
+            let r = least_loaded(&load, &seen);
             owner[i] = r;
             load[r] += runs[i].1;
-            total[r] += runs[i].1;
+            seen[r] += runs[i].1;
+        }
+        let spread = load.iter().max().unwrap_or(&0) - load.iter().min().unwrap_or(&0);
+        if spread > largest {
+            load.iter_mut().for_each(|l| *l = 0);
+            for &i in &by_size {
+                let r = least_loaded(&load, &total);
+                owner[i] = r;
+                load[r] += runs[i].1;
+            }
+        }
+        for &i in &these {
+            total[owner[i]] += runs[i].1;
         }
     }
     owner
@@ -1636,7 +1685,7 @@ mod tests {
             let (a, b) = (runs[these[0]].0, runs[these[1]].0);
             assert!(a.0 != b.0 && a.0 != b.1 && a.1 != b.0 && a.1 != b.1);
         }
-        let owner = group_owners(&runs, &colour, colours, 2);
+        let owner = group_owners(&runs, &colour, colours, 4, 2);
         for c in 0..3 {
             let mut ranks: Vec<_> = (0..6)
                 .filter(|&i| colour[i] == c)
@@ -1645,9 +1694,14 @@ mod tests {
             ranks.sort_unstable();
             assert_eq!(ranks, [0, 1], "colour {c}");
         }
-        assert_eq!(group_owners(&runs, &colour, colours, 1), [0; 6]);
+        assert_eq!(group_owners(&runs, &colour, colours, 4, 1), [0; 6]);
+        // Eight slabs in a row on two ranks (slabs 0–3 rank 0's): a colour's four groups of
+        // about the same size stay with the rank of their lower slab, two each (the largest
+        // first to the least loaded rank gave ranks 0, 1, 1, 0).
+        let row = [((0, 1), 40), ((2, 3), 39), ((4, 5), 38), ((6, 7), 37)];
+        assert_eq!(group_owners(&row, &[0; 4], 1, 8, 2), [0, 0, 1, 1]);
         // The sequential interface is rank 0's whatever the ranks.
-        assert_eq!(group_owners(&[((STATIC, STATIC), 9)], &[0], 1, 3), [0]);
+        assert_eq!(group_owners(&[((STATIC, STATIC), 9)], &[0], 1, 4, 3), [0]);
     }
 
     proptest::proptest! {
@@ -1738,7 +1792,7 @@ mod tests {
             }
             runs.sort_unstable();
             let (colour, colours) = colour_groups(&runs, k);
-            let owner = group_owners(&runs, &colour, colours, size);
+            let owner = group_owners(&runs, &colour, colours, k, size);
             for c in 0..colours {
                 let mut load = vec![0; size];
                 let mut largest = 0;

@@ -103,6 +103,28 @@ impl PairOwners {
         }
     }
 
+    /// Body `i`'s subdomain as the rule counts it (an attached body's parent's; [`STATIC`]
+    /// for the bodies of no subdomain).
+    pub(crate) fn subdomain(&self, i: usize) -> u32 {
+        self.subdomain.get(i).copied().unwrap_or(STATIC)
+    }
+
+    /// The number of subdomains.
+    pub(crate) fn count(&self) -> usize {
+        self.count
+    }
+
+    /// The rank that holds subdomain `s`'s own pairs.
+    pub(crate) fn of_subdomain(&self, s: usize) -> usize {
+        owner(s, self.count, self.size)
+    }
+
+    /// The interface groups: subdomain pair (`(STATIC, STATIC)` alone when Γ is solved as one
+    /// sequential group) and the rank that holds its pairs.
+    pub(crate) fn groups(&self) -> &[((u32, u32), usize)] {
+        &self.groups
+    }
+
     /// The rank that holds the pair of bodies `i`, `j`.
     pub(crate) fn of(&self, i: u32, j: u32) -> usize {
         let sub = |b: u32| self.subdomain.get(b as usize).copied().unwrap_or(STATIC);

@@ -12,13 +12,19 @@ use ballast_engine::world::{StepSettings, World};
 /// A floor and four walls (group 0): a box `side` × `side` wide, open at the top, its corner at
 /// the origin.
 pub fn open_box(side: f64) -> BodySet {
+    open_trench(side, side)
+}
+
+/// A floor and four walls (group 0): a box `length` × `width` (along x, y), open at the top,
+/// its corner at the origin.
+pub fn open_trench(length: f64, width: f64) -> BodySet {
     let mut bodies = BodySet::default();
     bodies.add_plane(DVec3::ZERO, DVec3::Z, 0);
     for (p, n) in [
         (DVec3::ZERO, DVec3::X),
-        (DVec3::new(side, 0.0, 0.0), -DVec3::X),
+        (DVec3::new(length, 0.0, 0.0), -DVec3::X),
         (DVec3::ZERO, DVec3::Y),
-        (DVec3::new(0.0, side, 0.0), -DVec3::Y),
+        (DVec3::new(0.0, width, 0.0), -DVec3::Y),
     ] {
         bodies.add_plane(p, n, 0);
     }
@@ -65,6 +71,30 @@ pub fn compliant_pile(subdomains: [usize; 3], parallel_interface: bool, paddle: 
         seed: 5,
     };
     pour(&mut bodies, &pack, 2700.0, 1);
+    compliant(bodies, subdomains, parallel_interface)
+}
+
+/// 250 grains settling at μ = 1 in a trench 0.8 m long and 0.1 m wide, with the law and
+/// solver of [`compliant_pile`], decomposed into `subdomains`.
+pub fn compliant_trench(subdomains: [usize; 3]) -> World {
+    let mut bodies = open_trench(0.8, 0.1);
+    let pack = GrainPack {
+        count: 250,
+        min: [0.0, 0.0, 0.002],
+        max_xy: [0.8, 0.1],
+        diameter: [0.025, 0.045],
+        vertices: [10, 16],
+        elongation: 1.3,
+        flatness: 1.1,
+        seed: 9,
+    };
+    pour(&mut bodies, &pack, 2700.0, 1);
+    compliant(bodies, subdomains, true)
+}
+
+/// `bodies` settling at μ = 1 with the default job's contact law (compliant, overlap law,
+/// hyperbolic closure, recovery), decomposed into `subdomains`.
+fn compliant(bodies: BodySet, subdomains: [usize; 3], parallel_interface: bool) -> World {
     let settings = StepSettings {
         dt: 4e-4,
         theta: 0.55,
