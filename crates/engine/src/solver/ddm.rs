@@ -221,8 +221,8 @@ pub struct InterfaceGroup {
     /// Colour: groups of one colour touch disjoint subdomains.
     pub colour: usize,
     /// The rank that sweeps it in a solve distributed over ranks (0 otherwise): each colour's
-    /// groups are divided between the ranks by contact count, largest first to the least
-    /// loaded.
+    /// groups are divided between the ranks by contact count, each kept on the rank of its
+    /// lower subdomain while the colour stays balanced (see `group_owners`).
     pub owner: usize,
     pub bucket: Bucket,
     /// The dynamic bodies its contacts join (solver numbering, sorted), listed when the
