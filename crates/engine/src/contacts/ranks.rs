@@ -234,10 +234,8 @@ impl ContactSet {
         let mine = |x: &&[f64]| x[0] as usize == me;
         let mut arrived =
             ContactSet::with_capacity(all.chunks_exact(VALUES + 1).filter(mine).count());
-        for x in all.chunks_exact(VALUES + 1) {
-            if x[0] as usize == me {
-                take(&x[1..], &mut arrived);
-            }
+        for x in all.chunks_exact(VALUES + 1).filter(mine) {
+            take(&x[1..], &mut arrived);
         }
         if send.is_empty() && arrived.is_empty() {
             return seconds;

@@ -378,14 +378,11 @@ impl Detector {
         };
         let needed = ranks::bodies_needed(owners, ex.rank(), &bounds(0.0));
         let placed = &self.cache.placed;
-        let held = |needed: &[bool]| {
-            placed.len() == needed.len() && needed.par_iter().zip(placed).all(|(&n, &p)| !n || p)
-        };
-        if needed.is_empty() || held(&needed) {
-            return match needed.is_empty() {
-                true => needed,
-                false => placed.clone(),
-            };
+        if needed.is_empty() {
+            return needed;
+        }
+        if placed.len() == needed.len() && needed.par_iter().zip(placed).all(|(&n, &p)| !n || p) {
+            return placed.clone();
         }
         let mut finite: Vec<f64> = half.iter().copied().filter(|h| h.is_finite()).collect();
         let slack = match finite.is_empty() {
