@@ -341,6 +341,7 @@ impl World {
     /// Kinematic bodies start with their driver's velocity at t = 0.
     pub fn new(mut bodies: BodySet, friction: FrictionTable, settings: StepSettings) -> Self {
         bodies.compact_shapes();
+        bodies.shrink_to_fit();
         for i in 0..bodies.len() {
             if let (BodyKind::Kinematic, Some(d)) = (bodies.kind[i], &bodies.driver[i]) {
                 let (v, w) = d.velocity(0.0);

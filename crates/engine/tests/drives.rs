@@ -78,14 +78,14 @@ fn pusher_world(speed: f64, max_force: f64, attached: bool) -> (World, usize, us
         let mut arm = ConvexPolyhedron::cuboid(DVec3::new(0.01, 0.01, 0.1)).unwrap();
         arm.position = DVec3::new(-0.06, 0.0, 0.35);
         let arm_id = bodies.add_polyhedron(arm, 7850.0, BodyKind::Kinematic, PUSHER);
-        bodies.driver[arm_id] = Some(driver);
-        bodies.driver[plate_id] = Some(Driver {
+        bodies.driver[arm_id] = Some(Box::new(driver));
+        bodies.driver[plate_id] = Some(Box::new(Driver {
             attached_to: Some(arm_id),
             ..Default::default()
-        });
+        }));
         arm_id
     } else {
-        bodies.driver[plate_id] = Some(driver);
+        bodies.driver[plate_id] = Some(Box::new(driver));
         plate_id
     };
     (
@@ -219,7 +219,7 @@ fn stirred_pile(ddm: Option<[usize; 3]>, limit: f64) -> World {
     let mut paddle = ConvexPolyhedron::cuboid(DVec3::new(0.005, 0.05, 0.03)).unwrap();
     paddle.position = DVec3::new(0.03, 0.1, 0.05);
     let pd = bodies.add_polyhedron(paddle, 7850.0, BodyKind::Kinematic, 2);
-    bodies.driver[pd] = Some(Driver {
+    bodies.driver[pd] = Some(Box::new(Driver {
         vx: vec![Term::Constant { value: 0.5 }],
         vz: vec![Term::Sine {
             amplitude: 0.2,
@@ -230,7 +230,7 @@ fn stirred_pile(ddm: Option<[usize; 3]>, limit: f64) -> World {
         }],
         max_force: [limit, f64::INFINITY, 4.0 * limit],
         ..Default::default()
-    });
+    }));
     let pack = GrainPack {
         count: 60,
         min: [0.0, 0.0, 0.002],
@@ -367,7 +367,7 @@ fn free_pusher(speed: f64, max_force: f64, catch_up: f64) -> (World, usize) {
     let mut plate = ConvexPolyhedron::cuboid(DVec3::new(0.01, 0.06, 0.04)).unwrap();
     plate.position = DVec3::new(0.0, 0.0, 1.0);
     let id = bodies.add_polyhedron(plate, 7850.0, BodyKind::Kinematic, PUSHER);
-    bodies.driver[id] = Some(Driver {
+    bodies.driver[id] = Some(Box::new(Driver {
         vx: vec![Term::Ramp {
             start: JUMP.0,
             end: JUMP.1,
@@ -377,7 +377,7 @@ fn free_pusher(speed: f64, max_force: f64, catch_up: f64) -> (World, usize) {
         max_force: [max_force, f64::INFINITY, f64::INFINITY],
         catch_up_speed: [catch_up, 0.0, 0.0],
         ..Default::default()
-    });
+    }));
     (World::new(bodies, friction(0.0), settings(1e-3)), id)
 }
 

@@ -42,7 +42,7 @@ fn cube(bodies: &mut BodySet, z: f64, driver: Driver) -> usize {
     let mut c = ConvexPolyhedron::cuboid(DVec3::splat(0.05)).unwrap();
     c.position = DVec3::new(0.0, 0.0, z);
     let i = bodies.add_polyhedron(c, RHO, BodyKind::Kinematic, 1);
-    bodies.driver[i] = Some(driver);
+    bodies.driver[i] = Some(Box::new(driver));
     i
 }
 

@@ -68,11 +68,11 @@ fn released_cube_flies_ballistically() {
     let mut cube = ConvexPolyhedron::cuboid(DVec3::splat(0.05)).unwrap();
     cube.position = DVec3::new(0.3, -0.2, z0);
     let c = bodies.add_polyhedron(cube, RHO, BodyKind::Kinematic, 0);
-    bodies.driver[c] = Some(Driver {
+    bodies.driver[c] = Some(Box::new(Driver {
         vz: vec![Term::Constant { value: vz }],
         release_at: Some(t_r),
         ..Default::default()
-    });
+    }));
     // Kinematic bodies carry their real mass (2700 kg/m³ · 0.001 m³ = 2.7 kg).
     assert!((bodies.mass(c) - RHO * 1e-3).abs() < 1e-12);
     let mut w = World::new(bodies, FrictionTable::new(0.5), tight_settings(h));
@@ -154,14 +154,14 @@ fn released_spin_keeps_angular_momentum() {
     b.position = DVec3::new(0.0, 0.0, 1.0);
     let i = bodies.add_polyhedron(b, RHO, BodyKind::Kinematic, 0);
     let omega = DVec3::new(1.0, -2.0, 3.0);
-    bodies.driver[i] = Some(Driver {
+    bodies.driver[i] = Some(Box::new(Driver {
         vx: vec![Term::Constant { value: 0.2 }],
         wx: vec![Term::Constant { value: omega.x }],
         wy: vec![Term::Constant { value: omega.y }],
         wz: vec![Term::Constant { value: omega.z }],
         release_at: Some(t_r),
         ..Default::default()
-    });
+    }));
     let mut w = World::new(bodies, FrictionTable::new(0.5), tight_settings(h));
     let release_step = steps_to_reach(t_r, h);
     for _ in 0..release_step {
@@ -202,10 +202,10 @@ fn held_box_bodies(release_at: f64) -> (BodySet, usize) {
     let mut b = ConvexPolyhedron::cuboid(DVec3::new(0.1, 0.08, 0.05)).unwrap();
     b.position = DVec3::new(0.0, 0.0, 0.07);
     let i = bodies.add_polyhedron(b, RHO, BodyKind::Kinematic, 1);
-    bodies.driver[i] = Some(Driver {
+    bodies.driver[i] = Some(Box::new(Driver {
         release_at: Some(release_at),
         ..Default::default()
-    });
+    }));
     (bodies, i)
 }
 
@@ -421,10 +421,10 @@ fn kinematic_without_release_at_is_never_released() {
     let mut slab = ConvexPolyhedron::cuboid(DVec3::new(0.2, 0.2, 0.02)).unwrap();
     slab.position = DVec3::new(0.0, 0.0, 0.5);
     let s = bodies.add_polyhedron(slab, RHO, BodyKind::Kinematic, 0);
-    bodies.driver[s] = Some(Driver {
+    bodies.driver[s] = Some(Box::new(Driver {
         vx: vec![Term::Constant { value: 0.01 }],
         ..Default::default()
-    });
+    }));
     let mut still = ConvexPolyhedron::cuboid(DVec3::splat(0.05)).unwrap();
     still.position = DVec3::new(1.0, 0.0, 0.5);
     let k = bodies.add_polyhedron(still, RHO, BodyKind::Kinematic, 0);

@@ -340,7 +340,7 @@ fn kinematic_driver_is_followed_and_pushes() {
     paddle.position = DVec3::new(-0.0605, 0.0, 0.06);
     let p = bodies.add_polyhedron(paddle, RHO, BodyKind::Kinematic, 2);
     // Constant push at 0.1 m/s plus a small sinusoid, along x.
-    bodies.driver[p] = Some(Driver {
+    bodies.driver[p] = Some(Box::new(Driver {
         vx: vec![
             Term::Constant { value: 0.1 },
             Term::Sine {
@@ -352,7 +352,7 @@ fn kinematic_driver_is_followed_and_pushes() {
             },
         ],
         ..Default::default()
-    });
+    }));
     let x0 = bodies.position[p].x;
     let mut w = World::new(bodies, FrictionTable::new(0.5), tight_settings(2e-4));
     for _ in 0..2500 {

@@ -38,11 +38,11 @@ fn scene() -> World {
     let mut c = c;
     c.position = DVec3::new(0.0, 0.5, 0.4);
     let k = bodies.add_polyhedron(c, 2700.0, BodyKind::Kinematic, 3);
-    bodies.driver[k] = Some(Driver {
+    bodies.driver[k] = Some(Box::new(Driver {
         vx: vec![Term::Constant { value: 0.25 }],
         wz: vec![Term::Constant { value: 1.5 }],
         ..Default::default()
-    });
+    }));
     bodies.add_plane(DVec3::new(-2.0, 0.0, 0.0), DVec3::new(1.0, 0.0, 0.2), 4);
     World::new(bodies, FrictionTable::new(0.5), StepSettings::default())
 }

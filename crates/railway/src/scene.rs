@@ -130,7 +130,7 @@ pub fn build_bodies(
     let (kind, driver) = match blocks {
         Blocks::Absent => (None, None),
         Blocks::Fixed => (Some(BodyKind::Fixed), None),
-        Blocks::Driven(d) => (Some(BodyKind::Kinematic), Some(Driver::clone(d))),
+        Blocks::Driven(d) => (Some(BodyKind::Kinematic), Some(Box::new(Driver::clone(d)))),
     };
     if let Some(kind) = kind {
         for k in 1..=track.blocks {
@@ -155,12 +155,12 @@ pub fn build_bodies(
             // The blade carries the drive and the tine's moving mass; the shaft is a rigid
             // part of it, so the ballast's forces on the shaft load the same drive.
             let [blade, shaft] = ids;
-            b.driver[blade] = Some(t.driver.clone());
+            b.driver[blade] = Some(Box::new(t.driver.clone()));
             b.inv_mass[blade] = 1.0 / t.mass;
-            b.driver[shaft] = Some(Driver {
+            b.driver[shaft] = Some(Box::new(Driver {
                 attached_to: Some(blade),
                 ..Driver::default()
-            });
+            }));
             tines.push(ids);
         }
     }

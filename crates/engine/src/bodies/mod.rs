@@ -46,8 +46,9 @@ pub struct BodySet {
     pub inv_mass: Vec<f64>,
     /// Principal moments of inertia (kg m²) about the body axes.
     pub inertia: Vec<DVec3>,
-    /// Imposed velocity of kinematic bodies.
-    pub driver: Vec<Option<Driver>>,
+    /// Imposed velocity of kinematic bodies. Boxed: a few bodies have one, and a driver
+    /// inline would cost every grain its size (about 0.4 kB).
+    pub driver: Vec<Option<Box<Driver>>>,
 }
 
 impl BodySet {
@@ -157,6 +158,22 @@ impl BodySet {
         if self.kind[i] == BodyKind::Dynamic {
             self.angular_momentum[i] = self.inertia_world(i) * omega;
         }
+    }
+
+    /// Frees the spare capacity the per-body arrays grew while the scene was added body by
+    /// body (up to half of each array).
+    pub(crate) fn shrink_to_fit(&mut self) {
+        self.kind.shrink_to_fit();
+        self.shape.shrink_to_fit();
+        self.group.shrink_to_fit();
+        self.position.shrink_to_fit();
+        self.orientation.shrink_to_fit();
+        self.velocity.shrink_to_fit();
+        self.angular_velocity.shrink_to_fit();
+        self.angular_momentum.shrink_to_fit();
+        self.inv_mass.shrink_to_fit();
+        self.inertia.shrink_to_fit();
+        self.driver.shrink_to_fit();
     }
 
     /// Re-allocates the polyhedra in body order (a shape shared by several bodies stays

@@ -877,7 +877,7 @@ impl Scenario {
             if let Some(w) = b.angular_velocity {
                 bodies.set_angular_velocity(i, vec3(w));
             }
-            bodies.driver[i] = b.driver.clone();
+            bodies.driver[i] = b.driver.clone().map(Box::new);
         }
         for (k, gs) in self.grains.iter().enumerate() {
             let g = group_id(&gs.group);

@@ -47,7 +47,7 @@ pub fn compliant_pile(subdomains: [usize; 3], parallel_interface: bool, paddle: 
         let mut p = ConvexPolyhedron::cuboid(DVec3::new(0.005, 0.05, 0.03)).unwrap();
         p.position = DVec3::new(0.03, 0.1, 0.05);
         let i = bodies.add_polyhedron(p, 7850.0, BodyKind::Kinematic, 2);
-        bodies.driver[i] = Some(Driver {
+        bodies.driver[i] = Some(Box::new(Driver {
             vx: vec![Term::Constant { value: 0.5 }],
             vz: vec![Term::Sine {
                 amplitude: 0.2,
@@ -58,7 +58,7 @@ pub fn compliant_pile(subdomains: [usize; 3], parallel_interface: bool, paddle: 
             }],
             max_force: [2.0, f64::INFINITY, 8.0],
             ..Default::default()
-        });
+        }));
     }
     let pack = GrainPack {
         count: 150,
