@@ -75,6 +75,12 @@ impl Exchange for MpiRanks {
         let mut part = PartitionMut::new(all, counts, displs);
         self.world.all_gather_varcount_into(mine, &mut part);
     }
+
+    fn sum_counts(&self, values: &mut [f64]) {
+        let mine = values.to_vec();
+        self.world
+            .all_reduce_into(&mine[..], values, SystemOperation::sum());
+    }
 }
 
 /// The worker threads a rank takes by default: this machine's cores divided among the ranks

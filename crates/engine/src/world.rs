@@ -19,7 +19,7 @@ use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::LocalBuilder;
 use crate::solver::exchange::PairOwners;
-use crate::solver::partition::SortedAxes;
+use crate::solver::partition::{self, SortedAxes, STATIC};
 use crate::solver::Exchange;
 use crate::solver::{
     ddm, CorrectionSettings, DdmSettings, DriveRows, LocalProblem, Nlgs, Partition, SolveReport,
@@ -452,24 +452,30 @@ impl World {
     /// [`Partition::build_from`]).
     fn partition_from(&self, d: &DdmSettings, sorted: &mut SortedAxes) -> Partition {
         let n = self.bodies.len();
-        let mut weights = vec![1.0; n];
-        if self.detector.hold {
-            // Every rank's contacts: the same weights on every rank.
-            for &(a, b) in &self.skeleton.bodies {
-                weights[a as usize] += 1.0;
-                weights[b as usize] += 1.0;
-            }
-        } else {
-            for k in 0..self.contacts.len() {
-                weights[self.contacts.body1[k] as usize] += 1.0;
-                weights[self.contacts.body2[k] as usize] += 1.0;
-            }
-        }
         // Force-limited driven bodies are written by the solver: they belong to the subdomain
         // of their centre like the grains.
         let dynamic: Vec<bool> = (0..n)
             .map(|i| self.bodies.kind[i] == BodyKind::Dynamic || self.force_limited(i).is_some())
             .collect();
+        if self.detector.hold {
+            // The ranks find the cuts together, each counting its own bodies and the bodies
+            // of the contacts it holds.
+            let ex = self.exchange.as_deref().expect("a rank holds pairs");
+            let cuts = partition::shared_cuts(
+                ex,
+                &self.bodies.position,
+                &dynamic,
+                &self.partition_counts(ex.rank()),
+                d.subdomains,
+                d.balance,
+            );
+            return Partition::from_cuts(&self.bodies.position, &dynamic, d.subdomains, &cuts);
+        }
+        let mut weights = vec![1.0; n];
+        for k in 0..self.contacts.len() {
+            weights[self.contacts.body1[k] as usize] += 1.0;
+            weights[self.contacts.body2[k] as usize] += 1.0;
+        }
         Partition::build_from(
             &self.bodies.position,
             &dynamic,
@@ -478,6 +484,32 @@ impl World {
             &weights,
             sorted,
         )
+    }
+
+    /// How many times rank `rank` counts each body toward the partition's weights: once each
+    /// body it owns (the owner of its subdomain at the last solve; rank 0 for a body that had
+    /// none), once more each body of each contact it holds. Over the ranks, a body's counts
+    /// add up to its weight `1 + contacts`. Before the first solve has placed the pairs (the
+    /// first detection on ranks) no rank holds contacts yet, and every body weighs 1.
+    fn partition_counts(&self, rank: usize) -> Vec<u32> {
+        let n = self.bodies.len();
+        let Some(owners) = self.detector.owners.as_ref() else {
+            return vec![u32::from(rank == 0); n];
+        };
+        let mut counts: Vec<u32> = (0..n)
+            .map(|i| {
+                let owner = match owners.subdomain(i) {
+                    STATIC => 0,
+                    s => owners.of_subdomain(s as usize),
+                };
+                u32::from(owner == rank)
+            })
+            .collect();
+        for k in 0..self.contacts.len() {
+            counts[self.contacts.body1[k] as usize] += 1;
+            counts[self.contacts.body2[k] as usize] += 1;
+        }
+        counts
     }
 
     /// Who holds each pair at a run's first detection on ranks (no solve has placed the

@@ -36,6 +36,19 @@ pub trait Exchange: Send + Sync + std::fmt::Debug {
     /// All-gather: each rank gives `mine` (`counts[rank]` values); `all` (`Σ counts` values)
     /// receives every rank's values, rank after rank.
     fn all_gather(&self, mine: &[f64], counts: &[usize], all: &mut [f64]);
+
+    /// All-reduce by sum: `values` (the same length on every rank) becomes, element by
+    /// element, the sum over the ranks. Only for counts (whole numbers below 2⁵³), whose sums
+    /// are exact in any order, so an implementation may add in any order (as `MPI_Allreduce`
+    /// does). By default an all-gather, summed in rank order.
+    fn sum_counts(&self, values: &mut [f64]) {
+        let (size, n) = (self.size(), values.len());
+        let mut all = vec![0.0; size * n];
+        self.all_gather(values, &vec![n; size], &mut all);
+        for (k, v) in values.iter_mut().enumerate() {
+            *v = (0..size).map(|r| all[r * n + k]).sum();
+        }
+    }
 }
 
 /// All-gather of a different number of values per rank: every rank's `mine`, rank after

@@ -11,9 +11,16 @@
 //! Bodies are renumbered so that each subdomain's bodies are contiguous (then the static
 //! bodies): subdomains own disjoint slices of the solver's body array. The partition depends on
 //! the scene only, never on the number of threads.
+//!
+//! Ranks sharing a run find the same cuts together, each from the bodies it owns and the
+//! contacts it holds (a radix select over sums of per-rank histograms), bit for bit those of
+//! one process.
 
 use crate::math::DVec3;
 use serde::{Deserialize, Serialize};
+
+mod ranks;
+pub(crate) use ranks::shared_cuts;
 
 /// Marks a body that belongs to no subdomain (kinematic or fixed).
 pub const STATIC: u32 = u32::MAX;
@@ -97,9 +104,21 @@ impl Partition {
         let [ox, oy, oz] = &mut sorted.0;
         let ((cx, cy), cz) =
             rayon::join(|| rayon::join(|| cut(0, ox), || cut(1, oy)), || cut(2, oz));
-        let cuts = [cx, cy, cz];
+        Self::from_cuts(positions, dynamic, dims, &[cx, cy, cz])
+    }
+
+    /// The partition whose boxes are cut along each axis at `cuts[axis]` (`dims[axis] − 1`
+    /// increasing values, or none: one box along that axis): each dynamic body in the box of
+    /// its centre, a cut's own coordinate in the box above it.
+    pub(crate) fn from_cuts(
+        positions: &[DVec3],
+        dynamic: &[bool],
+        dims: [usize; 3],
+        cuts: &[Vec<f64>; 3],
+    ) -> Self {
+        let n = positions.len();
         let mut subdomain = vec![STATIC; n];
-        for &i in &dyn_ids {
+        for i in (0..n).filter(|&i| dynamic[i]) {
             let mut idx = [0usize; 3];
             for axis in 0..3 {
                 let x = positions[i][axis];
@@ -210,6 +229,11 @@ fn volume_cuts(positions: &[DVec3], ids: &[usize], axis: usize, parts: usize) ->
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
             (lo.min(positions[i][axis]), hi.max(positions[i][axis]))
         });
+    uniform_cuts(lo, hi, parts)
+}
+
+/// `parts − 1` cuts evenly spaced in `lo..hi`.
+fn uniform_cuts(lo: f64, hi: f64, parts: usize) -> Vec<f64> {
     (1..parts)
         .map(|p| lo + (hi - lo) * p as f64 / parts as f64)
         .collect()
