@@ -8,11 +8,10 @@
 //! every contact once. A quantile is then found by a distributed radix select: every body has
 //! a 96-bit key, its coordinate's bits in total order then its index, which orders the bodies
 //! as one process sorts them; the key of the body where the cumulated weight crosses the
-//! quantile is
-//! narrowed 8 bits a round, each round one sum over the ranks of a 256-bin histogram of the
-//! weights in the range left. Weights are counts, whole numbers, so every sum is exact in
-//! whatever order the ranks add: the cuts are one process's, bit for bit. 13 collectives a
-//! step, of 256 values per quantile still open.
+//! quantile is narrowed 8 bits a round, each round one sum over the ranks of a 256-bin
+//! histogram of the weights in the range left. Weights are counts, whole numbers, so every sum
+//! is exact in whatever order the ranks add: the cuts are one process's, bit for bit. 13
+//! collectives a step, of 256 values per quantile still open.
 
 use super::Balance;
 use crate::math::DVec3;
