@@ -17,9 +17,40 @@ pub(crate) fn split_lengths<T>(
     (pieces, s)
 }
 
+/// Makes room in `v` for `n` elements in all. Where it must grow, it grows to `n` and a
+/// sixty-fourth more, not to the double that `Vec`'s amortised growth gives: a buffer rebuilt
+/// every step whose contents grow by a few elements would otherwise keep up to twice what it
+/// holds for the rest of the run.
+pub(crate) fn reserve_total<T>(v: &mut Vec<T>, n: usize) {
+    if v.capacity() < n {
+        v.reserve_exact(n + n / 64 - v.len());
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::split_lengths;
+    use super::{reserve_total, split_lengths};
+
+    #[test]
+    fn a_buffer_grows_to_what_it_holds_and_a_little() {
+        let mut v: Vec<u64> = Vec::new();
+        for n in [6_400, 6_401, 6_450, 6_600, 3_000] {
+            let before = v.capacity();
+            reserve_total(&mut v, n);
+            v.resize(n, 0);
+            if before >= n {
+                assert_eq!(v.capacity(), before, "room enough for {n}: unchanged");
+            } else {
+                assert!(v.capacity() >= n && v.capacity() <= n + n / 64, "{}", v.capacity());
+            }
+            v.clear();
+        }
+        // The amortised growth of `Vec` doubles for one element more.
+        let mut w: Vec<u64> = vec![0; 6_400];
+        w.shrink_to_fit();
+        w.push(0);
+        assert!(w.capacity() >= 12_800);
+    }
 
     #[test]
     fn pieces_are_consecutive_and_the_rest_is_returned() {

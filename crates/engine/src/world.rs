@@ -598,7 +598,8 @@ impl World {
 
     /// The local problems of the step being prepared (after [`World::prepare`] or
     /// [`World::detect`]), in the contacts' order. Empty after a step with `[ddm]` that was not
-    /// prepared so: its solver built them straight into its subdomains' buckets.
+    /// prepared so, and on ranks that hold their own pairs: the solver builds them straight
+    /// into its subdomains' buckets.
     pub fn local_problems(&self) -> &[LocalProblem] {
         &self.scratch.locals
     }
@@ -827,7 +828,9 @@ impl World {
         // 3. Local problems.
         // Without warm start the solver starts from zero impulses; the previous ones stay the
         // compliant law's memory.
-        if build {
+        // A rank that holds its pairs builds them in its buckets once its pairs have moved to
+        // where the solve holds them: built here, they would be of other contacts, unused.
+        if build && !self.detector.hold {
             let mut locals = std::mem::take(&mut self.scratch.locals);
             self.local_builder().build_all(&mut locals);
             self.scratch.locals = locals;

@@ -6,6 +6,7 @@ use crate::bodies::BodySet;
 use crate::detection::RawContact;
 use crate::laws::{ContactStatus, FrictionTable};
 use crate::math::{frame_from_normal, DVec3};
+use crate::slices::reserve_total;
 
 mod ranks;
 pub(crate) use ranks::Skeleton;
@@ -40,6 +41,19 @@ impl ContactSet {
     /// True when there is no contact.
     pub fn is_empty(&self) -> bool {
         self.body1.is_empty()
+    }
+
+    /// Room for `n` contacts in every field, grown tightly (see [`reserve_total`]).
+    fn reserve_total(&mut self, n: usize) {
+        reserve_total(&mut self.body1, n);
+        reserve_total(&mut self.body2, n);
+        reserve_total(&mut self.point, n);
+        reserve_total(&mut self.frame, n);
+        reserve_total(&mut self.gap, n);
+        reserve_total(&mut self.mu, n);
+        reserve_total(&mut self.impulse, n);
+        reserve_total(&mut self.status, n);
+        reserve_total(&mut self.local_point, n);
     }
 
     /// Impulse of contact `k` in world coordinates (acting on body 2).
@@ -100,6 +114,7 @@ impl ContactSet {
     ) {
         use rayon::prelude::*;
         let n = raw.len();
+        self.reserve_total(n);
         self.body1.resize(n, 0);
         self.body2.resize(n, 0);
         self.point.resize(n, DVec3::ZERO);

@@ -175,7 +175,11 @@ impl Skeleton {
         let t = std::time::Instant::now();
         let (all, counts) = exchange::gather_varying(ex, &mine);
         let seconds = t.elapsed().as_secs_f64();
-        let mut s = Skeleton::default();
+        let mut s = Skeleton {
+            bodies: Vec::with_capacity(all.chunks_exact(3).map(|x| x[2] as usize).sum()),
+            runs: Vec::with_capacity(all.len() / 3),
+            global: Vec::new(),
+        };
         in_pair_order(&all, &counts, 3, |x| {
             let (a, b) = (x[0] as u32, x[1] as u32);
             s.runs.push(((a.min(b), a.max(b)), s.bodies.len() as u32));

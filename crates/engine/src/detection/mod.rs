@@ -20,7 +20,7 @@ use outcomes::Outcomes;
 use crate::bodies::{BodyKind, BodySet};
 use crate::math::{DQuat, DVec3};
 use crate::shapes::{ConvexPolyhedron, Shape};
-use crate::slices::split_lengths;
+use crate::slices::{reserve_total, split_lengths};
 use crate::solver::exchange::PairOwners;
 use crate::solver::Exchange;
 use rayon::prelude::*;
@@ -653,7 +653,9 @@ fn write_points(
     };
     // Each run of pairs writes its points, in pair order, where the runs before it end.
     let counts: Vec<usize> = results.runs().map(|(_, run)| run.point_count()).collect();
-    out.resize(counts.iter().sum(), blank);
+    let total = counts.iter().sum();
+    reserve_total(out, total);
+    out.resize(total, blank);
     let (slices, _) = split_lengths(out, counts);
     slices
         .into_par_iter()

@@ -124,6 +124,7 @@ impl Outcomes {
         fill: impl Fn(Range<usize>, &mut dyn FnMut(PairGeometry)) + Sync,
     ) {
         self.heads.clear();
+        crate::slices::reserve_total(&mut self.heads, n);
         self.heads.resize(n, Head::BLANK);
         self.runs.resize_with(n.div_ceil(CHUNK), Run::default);
         self.heads

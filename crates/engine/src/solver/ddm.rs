@@ -32,6 +32,7 @@ use super::partition::{Balance, Partition, STATIC};
 use super::StopRule;
 use crate::laws::{ContactStatus, Elastic};
 use crate::math::DVec3;
+use crate::slices::reserve_total;
 use crate::ScenarioError;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -165,15 +166,23 @@ pub struct Bucket {
 impl Bucket {
     /// Appends the contacts `members`, each as `make` gives it (written in place).
     fn fill(&mut self, members: &[u32], make: impl Fn(u32) -> LocalProblem) {
+        let n = self.locals.len() + members.len();
+        reserve_total(&mut self.locals, n);
         self.locals.extend(members.iter().map(|&idx| make(idx)));
-        self.origin.extend_from_slice(members);
-        self.status
-            .resize(self.origin.len(), ContactStatus::NoContact);
+        self.list(members);
     }
 
     /// Lists the contacts `members` of a remote bucket (no local problem built).
     fn fill_remote(&mut self, members: &[u32]) {
         self.remote = true;
+        self.list(members);
+    }
+
+    /// Appends the contacts `members` to the bucket's list, their status unknown.
+    fn list(&mut self, members: &[u32]) {
+        let n = self.origin.len() + members.len();
+        reserve_total(&mut self.origin, n);
+        reserve_total(&mut self.status, n);
         self.origin.extend_from_slice(members);
         self.status
             .resize(self.origin.len(), ContactStatus::NoContact);
@@ -332,6 +341,7 @@ impl DdmProblem {
         self.members.resize_with(k, Vec::new);
         self.members.iter_mut().for_each(Vec::clear);
         self.slot.clear();
+        reserve_total(&mut self.slot, n);
         self.slot.resize(n, (0, 0));
         let gamma = &mut self.gamma;
         gamma.clear();
@@ -1288,6 +1298,7 @@ pub(crate) fn solve_contacts(
     // 1. Residual scale (terms in parallel, summed in the equivalent order), then warm start.
     let buckets: Vec<&Bucket> = p.buckets().collect();
     terms.clear();
+    reserve_total(terms, n);
     terms.resize(n, 0.0);
     {
         let (chunks, _) =
