@@ -27,9 +27,18 @@ pub(crate) fn reserve_total<T>(v: &mut Vec<T>, n: usize) {
     }
 }
 
+/// Gives back the spare room of a buffer kept from step to step when it exceeds a quarter of
+/// what it holds (after `Vec`'s amortised growth doubled it), keeping a sixteenth.
+pub(crate) fn trim<T>(v: &mut Vec<T>) {
+    let n = v.len();
+    if v.capacity() > n + n / 4 + 16 {
+        v.shrink_to(n + n / 16);
+    }
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{reserve_total, split_lengths};
+    use super::{reserve_total, split_lengths, trim};
 
     #[test]
     fn a_buffer_grows_to_what_it_holds_and_a_little() {
@@ -41,15 +50,30 @@ mod tests {
             if before >= n {
                 assert_eq!(v.capacity(), before, "room enough for {n}: unchanged");
             } else {
-                assert!(v.capacity() >= n && v.capacity() <= n + n / 64, "{}", v.capacity());
+                assert!(
+                    v.capacity() >= n && v.capacity() <= n + n / 64,
+                    "{}",
+                    v.capacity()
+                );
             }
             v.clear();
         }
-        // The amortised growth of `Vec` doubles for one element more.
+        // The amortised growth of `Vec` doubles for one element more; trimmed, a sixteenth
+        // is left.
         let mut w: Vec<u64> = vec![0; 6_400];
         w.shrink_to_fit();
         w.push(0);
         assert!(w.capacity() >= 12_800);
+        trim(&mut w);
+        assert!(
+            w.capacity() >= 6_401 && w.capacity() <= 6_401 + 400,
+            "{}",
+            w.capacity()
+        );
+        let kept = w.capacity();
+        w.truncate(6_000);
+        trim(&mut w);
+        assert_eq!(w.capacity(), kept, "less than a quarter spare: kept");
     }
 
     #[test]

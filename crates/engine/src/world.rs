@@ -443,7 +443,8 @@ impl World {
     }
 
     /// The partition of this step: boxes over the dynamic bodies' centres, weighted by
-    /// `1 + number of contacts` when balancing by contacts.
+    /// `1 + number of contacts` when balancing by contacts. On ranks that hold their own
+    /// pairs the ranks find it together: a collective, every rank calls it at the same point.
     pub fn partition(&self, d: &DdmSettings) -> Partition {
         self.partition_from(d, &mut SortedAxes::default())
     }

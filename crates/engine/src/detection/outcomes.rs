@@ -1,12 +1,14 @@
 //! A step's narrow-phase outcomes, one per candidate pair in pair order, kept for the next
 //! step's reuse, stored compactly: about half of the candidate pairs are apart and a manifold
 //! averages two points, so a fixed slot of four points per pair (168 bytes) held more than
-//! twice what the outcomes need (about 70 bytes a pair). Each pair has a 24-byte head; the manifolds' normals and points are
-//! kept per run of [`CHUNK`] pairs, in pair order, in vectors that live from step to step (no
-//! allocation, no joining copy once they have grown).
+//! twice what the outcomes need (about 70 bytes a pair). Each pair has a 24-byte head; the
+//! manifolds' normals and points are kept per run of [`CHUNK`] pairs, in pair order, in
+//! vectors that live from step to step (no joining copy; an allocation only when a run grows,
+//! and then the room its growth doubled is given back).
 
 use super::{FaceHint, ManifoldPoint, PairGeometry};
 use crate::math::DVec3;
+use crate::slices::trim;
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -159,6 +161,9 @@ impl Outcomes {
                     filled += 1;
                 });
                 assert_eq!(filled, heads.len(), "one outcome per pair");
+                // Room for next step's few more, not the double a run that grew was given.
+                trim(&mut run.normals);
+                trim(&mut run.points);
             });
     }
 }
