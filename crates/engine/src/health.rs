@@ -36,6 +36,7 @@
 
 use crate::bodies::{BodyKind, Driver};
 use crate::math::DVec3;
+use crate::output::shared::gather;
 use crate::shapes::Shape;
 use crate::world::World;
 use std::fmt;
@@ -357,7 +358,7 @@ impl HealthCheck {
     pub fn margins(&self, world: &World) -> (f64, f64) {
         let b = &world.bodies;
         let mut speed = 0.0f64;
-        for i in 0..b.len() {
+        for i in (0..b.len()).filter(|&i| world.answers_for(i)) {
             if b.kind[i] != BodyKind::Fixed {
                 let r = self.radius.get(i).copied().unwrap_or(0.0);
                 let v = norm(b.velocity[i]) + norm(b.angular_velocity[i]) * r;
@@ -365,6 +366,9 @@ impl HealthCheck {
                     speed = speed.max(v / self.max_speed);
                 }
             }
+        }
+        if world.shares_bodies() {
+            speed = world.max_over_ranks(speed);
         }
         let overlap = world.max_over_contacts(0.0, |c, k| {
             let ratio = -c.gap[k] / self.overlap_bound(c.body1[k] as usize, c.body2[k] as usize);
@@ -401,7 +405,7 @@ impl HealthCheck {
         // 1. Non-finite state.
         let mut first: Option<(usize, Quantity, f64)> = None;
         let mut count = 0;
-        for i in 0..b.len() {
+        for i in (0..b.len()).filter(|&i| world.answers_for(i)) {
             // Runs after every step over every body: no allocation here.
             let bad_in =
                 |what: Quantity, xs: &[f64]| xs.iter().find(|x| !x.is_finite()).map(|&x| (what, x));
@@ -413,6 +417,9 @@ impl HealthCheck {
                 count += 1;
                 first.get_or_insert((i, what, x));
             }
+        }
+        if world.shares_bodies() {
+            (first, count) = non_finite_over_ranks(world, first, count);
         }
         if let Some((i, what, x)) = first {
             return fault(
@@ -427,7 +434,7 @@ impl HealthCheck {
         // 2. Speed of the fastest point.
         let mut worst: Option<(usize, f64)> = None;
         let mut count = 0;
-        for i in 0..b.len() {
+        for i in (0..b.len()).filter(|&i| world.answers_for(i)) {
             if b.kind[i] == BodyKind::Fixed {
                 continue;
             }
@@ -439,6 +446,9 @@ impl HealthCheck {
                     worst = Some((i, v));
                 }
             }
+        }
+        if world.shares_bodies() {
+            (worst, count) = fastest_over_ranks(world, worst, count);
         }
         if let Some((i, v)) = worst {
             return fault(
@@ -558,6 +568,64 @@ pub fn initial_warnings(world: &World, depth: f64, lines: usize) -> Vec<String> 
         ));
     }
     out
+}
+
+/// The quantities of a body's state the non-finite pass reads, in its order.
+const STATE: [Quantity; 4] = [
+    Quantity::Position,
+    Quantity::Orientation,
+    Quantity::Velocity,
+    Quantity::AngularVelocity,
+];
+
+/// The non-finite pass's answer over the ranks, from each rank's over its own bodies: the
+/// fault of the lowest-numbered body (the first a single process finds) and the sum of the
+/// counts. A collective.
+fn non_finite_over_ranks(
+    world: &World,
+    first: Option<(usize, Quantity, f64)>,
+    count: usize,
+) -> (Option<(usize, Quantity, f64)>, usize) {
+    let mine = match first {
+        Some((i, what, x)) => {
+            let q = STATE.iter().position(|&s| s == what).unwrap_or(0);
+            [count as f64, i as f64, q as f64, x]
+        }
+        None => [count as f64, -1.0, 0.0, 0.0],
+    };
+    let all = gather(world, &mine);
+    let count = all.chunks_exact(4).map(|c| c[0] as usize).sum();
+    let first = all
+        .chunks_exact(4)
+        .filter(|c| c[1] >= 0.0)
+        .min_by(|a, b| a[1].total_cmp(&b[1]))
+        .map(|c| (c[1] as usize, STATE[c[2] as usize], c[3]));
+    (first, count)
+}
+
+/// The speed pass's answer over the ranks, from each rank's over its own bodies: the fastest
+/// body, the lowest-numbered of equally fast ones (the one a single process keeps), and the
+/// sum of the counts. A collective.
+fn fastest_over_ranks(
+    world: &World,
+    worst: Option<(usize, f64)>,
+    count: usize,
+) -> (Option<(usize, f64)>, usize) {
+    let mine = match worst {
+        Some((i, v)) => [count as f64, i as f64, v],
+        None => [count as f64, -1.0, 0.0],
+    };
+    let all = gather(world, &mine);
+    let count = all.chunks_exact(3).map(|c| c[0] as usize).sum();
+    let worst = all
+        .chunks_exact(3)
+        .filter(|c| c[1] >= 0.0)
+        .map(|c| (c[1] as usize, c[2]))
+        .reduce(|a, b| match b.1 > a.1 || (b.1 == a.1 && b.0 < a.0) {
+            true => b,
+            false => a,
+        });
+    (worst, count)
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@ use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::LocalBuilder;
 use crate::solver::exchange::PairOwners;
-use crate::solver::partition::{self, SortedAxes, STATIC};
+use crate::solver::partition::{self, SortedAxes};
 use crate::solver::Exchange;
 use crate::solver::{
     ddm, CorrectionSettings, DdmSettings, DriveRows, LocalProblem, Nlgs, Partition, SolveReport,
@@ -494,17 +494,11 @@ impl World {
     /// first detection on ranks) no rank holds contacts yet, and every body weighs 1.
     fn partition_counts(&self, rank: usize) -> Vec<u32> {
         let n = self.bodies.len();
-        let Some(owners) = self.detector.owners.as_ref() else {
+        if self.detector.owners.is_none() {
             return vec![u32::from(rank == 0); n];
-        };
+        }
         let mut counts: Vec<u32> = (0..n)
-            .map(|i| {
-                let owner = match owners.subdomain(i) {
-                    STATIC => 0,
-                    s => owners.of_subdomain(s as usize),
-                };
-                u32::from(owner == rank)
-            })
+            .map(|i| u32::from(self.body_owner(i) == rank))
             .collect();
         for k in 0..self.contacts.len() {
             counts[self.contacts.body1[k] as usize] += 1;

@@ -215,3 +215,50 @@ fn each_rank_builds_only_its_own_local_problems() {
         assert_eq!(sum, all, "{k} ranks: {held:?}");
     }
 }
+
+/// The health check, each rank looking at its own bodies only, names on every rank what one
+/// process names: the fastest body and the first non-finite one wherever they are owned, the
+/// count over all ranks, and the speed margin.
+#[test]
+fn a_diverging_state_is_named_alike_on_ranks() {
+    fn make() -> World {
+        pile([2, 2, 1], true, false)
+    }
+    /// After 30 steps: every 7th dynamic body thrown at 100–102 m/s without spin (equally
+    /// fast ones on different ranks), and,
+    /// when `nan`, every 11th from the middle on given a non-finite position.
+    fn check(w: &mut World, nan: bool) -> (String, u64) {
+        use ballast_engine::bodies::BodyKind;
+        use ballast_engine::health::HealthCheck;
+        use ballast_engine::math::DVec3;
+        let health = HealthCheck::new(w);
+        for _ in 0..30 {
+            w.step();
+        }
+        let n = w.bodies.len();
+        for i in (0..n).filter(|&i| w.bodies.kind[i] == BodyKind::Dynamic) {
+            if i % 7 == 0 {
+                w.bodies.velocity[i] = DVec3::new(100.0 + (i % 3) as f64, 0.0, 0.0);
+                w.bodies.angular_velocity[i] = DVec3::ZERO;
+            }
+            if nan && i >= n / 2 && i % 11 == 0 {
+                w.bodies.position[i].y = f64::NAN;
+            }
+        }
+        let margin = health.margins(w).0.to_bits();
+        (format!("{:?}", health.check(w)), margin)
+    }
+    for nan in [false, true] {
+        let alone = check(&mut make(), nan);
+        assert!(alone.0.starts_with("Err"), "{}", alone.0);
+        for k in [2, 3] {
+            let ranks = match nan {
+                false => with_ranks(k, make, |w| check(w, false)),
+                true => with_ranks(k, make, |w| check(w, true)),
+            };
+            for (r, got) in ranks.iter().enumerate() {
+                assert_eq!(got, &alone, "rank {r} of {k}");
+            }
+        }
+    }
+}

@@ -6,6 +6,7 @@
 //! tumbling body requires, whatever the orientation error of the exponential-map update.
 
 pub mod driver;
+mod ranks;
 
 pub use driver::{Driver, Limits, Profile, Term, Velocities};
 
