@@ -114,26 +114,28 @@ pub(crate) fn shared_cuts(
     }
     let counted = |i: usize| dynamic[i] && counts[i] > 0;
     if balance == Balance::Volume {
-        // Each rank's extent, then the smallest and largest over the ranks.
-        let mut mine = Vec::with_capacity(2 * axes.len());
+        // Each rank's extent and count, then the smallest, largest and sum over the ranks
+        // (cut wherever a dynamic body is, as one process does, even from non-finite extents).
+        let mut mine = Vec::with_capacity(3 * axes.len());
+        let count = (0..positions.len()).filter(|&i| counted(i)).count() as f64;
         for &a in &axes {
             let (lo, hi) = (0..positions.len())
                 .filter(|&i| counted(i))
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), i| {
                     (lo.min(positions[i][a]), hi.max(positions[i][a]))
                 });
-            mine.extend([lo, hi]);
+            mine.extend([lo, hi, count]);
         }
         let size = ex.size();
         let mut all = vec![0.0; size * mine.len()];
         ex.all_gather(&mine, &vec![mine.len(); size], &mut all);
         for (j, &a) in axes.iter().enumerate() {
-            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            let (mut lo, mut hi, mut count) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
             for r in 0..size {
-                lo = lo.min(all[r * mine.len() + 2 * j]);
-                hi = hi.max(all[r * mine.len() + 2 * j + 1]);
+                let x = &all[r * mine.len() + 3 * j..r * mine.len() + 3 * j + 3];
+                (lo, hi, count) = (lo.min(x[0]), hi.max(x[1]), count + x[2]);
             }
-            if lo <= hi {
+            if count > 0.0 {
                 cuts[a] = super::uniform_cuts(lo, hi, dims[a]);
             }
         }
@@ -263,8 +265,8 @@ mod tests {
 
     proptest::proptest! {
         /// The ranks' cuts are one process's, bit for bit: random centres (some sharing a
-        /// coordinate, some on the same spot), random contacts, random dynamic bodies, the
-        /// bodies and contacts dealt at random among 1–4 ranks.
+        /// coordinate, some on the same spot, some not finite), random contacts, random
+        /// dynamic bodies, the bodies and contacts dealt at random among 1–4 ranks.
         #[test]
         fn ranks_cut_where_one_process_does(
             seed in 0u64..1_000_000,
@@ -278,12 +280,16 @@ mod tests {
                 state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 (state >> 11) as f64 / (1u64 << 53) as f64
             };
+            // A diverged scene too (every seventh seed): non-finite centres, one axis all NaN.
+            let diverged = seed % 7 == 0;
             let positions: Vec<DVec3> = (0..n)
                 .map(|i| match i % 9 {
                     4 => DVec3::new(0.25, -0.5, 0.0),
                     5 => DVec3::new(next() - 0.5, 0.25, 1.5),
+                    8 if diverged => DVec3::new(f64::NAN, f64::INFINITY, f64::NAN),
                     _ => DVec3::new(next() - 0.5, 3.0 * next() - 2.0, next() * 1e-3),
                 })
+                .map(|p| if diverged { DVec3::new(p.x, p.y, f64::NAN) } else { p })
                 .collect();
             let dynamic: Vec<bool> = (0..n).map(|_| next() < 0.9).collect();
             let pairs: Vec<(usize, usize)> = (0..contacts.min(n * n))
