@@ -52,11 +52,8 @@ impl Owners {
 /// Every rank's `mine` (the same number of values on every rank), gathered in rank order: a
 /// collective, every rank calls it at the same point. Alone: `mine`.
 pub(crate) fn gather(world: &World, mine: &[f64]) -> Vec<f64> {
-    let Some(ex) = world.exchange() else {
-        return mine.to_vec();
-    };
-    let size = ex.size();
-    let mut all = vec![0.0; size * mine.len()];
-    ex.all_gather(mine, &vec![mine.len(); size], &mut all);
-    all
+    match world.exchange() {
+        Some(ex) => crate::solver::exchange::gather_equal(ex, mine),
+        None => mine.to_vec(),
+    }
 }

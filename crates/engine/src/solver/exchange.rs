@@ -51,6 +51,15 @@ pub trait Exchange: Send + Sync + std::fmt::Debug {
     }
 }
 
+/// All-gather of the same number of values on every rank: every rank's `mine`, rank after
+/// rank.
+pub(crate) fn gather_equal(ex: &dyn Exchange, mine: &[f64]) -> Vec<f64> {
+    let size = ex.size();
+    let mut all = vec![0.0; size * mine.len()];
+    ex.all_gather(mine, &vec![mine.len(); size], &mut all);
+    all
+}
+
 /// All-gather of a different number of values per rank: every rank's `mine`, rank after
 /// rank, and how many each gave (two collectives: the counts, then the values).
 pub(crate) fn gather_varying(ex: &dyn Exchange, mine: &[f64]) -> (Vec<f64>, Vec<usize>) {

@@ -15,7 +15,7 @@
 
 use super::Balance;
 use crate::math::DVec3;
-use crate::solver::exchange::Exchange;
+use crate::solver::exchange::{gather_equal, Exchange};
 
 /// Bits of a key: the coordinate's 64, then the body's index's 32.
 const KEY_BITS: u32 = 96;
@@ -126,9 +126,7 @@ pub(crate) fn shared_cuts(
                 });
             mine.extend([lo, hi, count]);
         }
-        let size = ex.size();
-        let mut all = vec![0.0; size * mine.len()];
-        ex.all_gather(&mine, &vec![mine.len(); size], &mut all);
+        let (size, all) = (ex.size(), gather_equal(ex, &mine));
         for (j, &a) in axes.iter().enumerate() {
             let (mut lo, mut hi, mut count) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
             for r in 0..size {
@@ -217,9 +215,7 @@ pub(crate) fn shared_cuts(
             None => NONE,
         });
     }
-    let size = ex.size();
-    let mut all = vec![0.0; size * mine.len()];
-    ex.all_gather(&mine, &vec![mine.len(); size], &mut all);
+    let (size, all) = (ex.size(), gather_equal(ex, &mine));
     for (j, q) in open.iter().enumerate() {
         let next = (0..size)
             .map(|r| &all[r * mine.len() + 4 * j..r * mine.len() + 4 * j + 4])
