@@ -5,7 +5,8 @@
 //! so does its checkpoint (written in parts) resumed by one process; a 2-rank job killed
 //! (`kill -9` of every process) at a step or while its ranks write a checkpoint resumes on 2
 //! ranks to the uninterrupted run's results; a rank that fails ends the job with an error, no
-//! hang; ranks on one machine share its cores by default.
+//! hang; a run that diverges stops on every rank as one process does; ranks on one machine
+//! share its cores by default.
 #![cfg(feature = "mpi")]
 
 mod common;
@@ -338,6 +339,70 @@ fn a_failing_rank_ends_the_job() {
         err.contains("rank 0") && err.contains("holds another run"),
         "{err}"
     );
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+/// A run that diverges on ranks stops on every rank where one process stops, with exit code
+/// 3 and no hang, and writes one process's `summary.json` (status, divergence, kinetic energy
+/// and digest gathered from the bodies' owners) and rows: at a step (`max_speed`, after
+/// checkpoints) and in its initial state (a box thrown at 1e12 m/s).
+#[test]
+fn a_diverging_run_stops_alike_on_ranks() {
+    let root = tmp("diverge");
+    let text = std::fs::read_to_string(example("examples/pile.toml")).unwrap();
+    let (interval, grains) = ("output_interval = 50", "[[grains]]");
+    assert!(text.contains(interval) && text.contains(grains));
+    let slow = text.replacen(
+        interval,
+        "output_interval = 50\ncheckpoint_interval = 50\nmax_speed = 0.5",
+        1,
+    );
+    let thrown = text.replacen(
+        grains,
+        "[[body]]\nshape = \"box\"\ngroup = \"projectile\"\nmaterial = \"stone\"\n\
+         half_extents = [0.02, 0.02, 0.02]\ncenter = [0.1, 0.1, 5]\n\
+         velocity = [1e12, 0, 0]\n\n[[grains]]",
+        1,
+    );
+    let unshared = |dir: &Path| {
+        let mut s = summary_without_timings(dir);
+        let m = s.as_object_mut().unwrap();
+        m.remove("ranks");
+        m.remove("threads");
+        s
+    };
+    for (name, scenario, step) in [("slow", slow, 255), ("thrown", thrown, 0)] {
+        let file = root.join(format!("{name}.toml"));
+        std::fs::write(&file, scenario).unwrap();
+        let run = |ranks: Option<usize>| {
+            let out = root.join(format!("{name}-{}", ranks.unwrap_or(1)));
+            let o = ballast(
+                ranks,
+                &[
+                    "run",
+                    file.to_str().unwrap(),
+                    "--subdomains",
+                    "2x2x1",
+                    "--quiet",
+                    "--out",
+                    out.to_str().unwrap(),
+                ],
+            );
+            let err = String::from_utf8_lossy(&o.stderr).to_string();
+            assert_eq!(o.status.code(), Some(3), "{name} on {ranks:?} ranks: {err}");
+            assert!(!err.contains("panicked"), "{err}");
+            out
+        };
+        let alone = run(None);
+        assert_eq!(summary(&alone)["status"], "diverged");
+        assert_eq!(summary(&alone)["divergence"]["step"], step);
+        for k in [2, 3] {
+            let d = run(Some(k));
+            assert_eq!(unshared(&d), unshared(&alone), "{name} on {k} ranks");
+            assert_eq!(outputs(&d), outputs(&alone), "{name} on {k} ranks");
+            assert_eq!(checkpoint_steps(&d), checkpoint_steps(&alone));
+        }
+    }
     let _ = std::fs::remove_dir_all(&root);
 }
 

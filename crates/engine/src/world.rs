@@ -13,13 +13,13 @@
 
 use crate::bodies::{BodyKind, BodySet, Limits};
 use crate::contacts::{ContactSet, Skeleton};
-use crate::detection::{Detector, RawContact};
+use crate::detection::{ghosts, Detector, RawContact};
 use crate::laws::{default_overlap_cap, driven_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
 use crate::solver::delassus::LocalBuilder;
 use crate::solver::exchange::PairOwners;
-use crate::solver::partition::{self, SortedAxes};
+use crate::solver::partition::{self, SortedAxes, STATIC};
 use crate::solver::Exchange;
 use crate::solver::{
     ddm, CorrectionSettings, DdmSettings, DriveRows, LocalProblem, Nlgs, Partition, SolveReport,
@@ -460,17 +460,29 @@ impl World {
             .collect();
         if self.detector.hold {
             // The ranks find the cuts together, each counting its own bodies and the bodies
-            // of the contacts it holds.
+            // of the contacts it holds; then each places its own bodies, and the ranks share
+            // those that changed subdomain since the last solve.
             let ex = self.exchange.as_deref().expect("a rank holds pairs");
+            let positions = &self.bodies.position;
             let cuts = partition::shared_cuts(
                 ex,
-                &self.bodies.position,
+                positions,
                 &dynamic,
                 &self.partition_counts(ex.rank()),
                 d.subdomains,
                 d.balance,
             );
-            return Partition::from_cuts(&self.bodies.position, &dynamic, d.subdomains, &cuts);
+            let last = self.detector.owners.as_ref();
+            let subdomain = partition::shared_subdomains(
+                ex,
+                positions,
+                &dynamic,
+                d.subdomains,
+                &cuts,
+                |i| self.body_owner(i) == ex.rank(),
+                |i| last.map_or(STATIC, |o| o.placed(i)),
+            );
+            return Partition::from_subdomains(d.subdomains, subdomain);
         }
         let mut weights = vec![1.0; n];
         for k in 0..self.contacts.len() {
@@ -724,13 +736,18 @@ impl World {
             self.detector.owners = Some(self.first_owners());
         }
         std::mem::swap(&mut self.scratch.previous, &mut self.contacts);
-        self.detector.detect(
-            &self.bodies,
-            s.alert,
-            s.dt,
-            s.reuse_distance,
-            &mut self.scratch.raw,
-        );
+        let d = &mut self.detector;
+        let layout_changed = d.begin(&self.bodies, s.alert, s.dt, s.reuse_distance);
+        // Ranks that share the bodies: each is sent the other ranks' bodies it reads.
+        let mut ghost_seconds = 0.0;
+        match self.exchange.as_deref().filter(|_| d.hold) {
+            Some(ex) => {
+                ghost_seconds = d.share_ghosts(ex, &mut self.bodies, s.alert, s.reuse_distance)
+            }
+            None => d.fresh.clear(),
+        }
+        let raw = &mut self.scratch.raw;
+        d.finish(&self.bodies, s.alert, s.reuse_distance, layout_changed, raw);
         self.contacts.rebuild(
             &self.scratch.raw,
             &self.bodies,
@@ -739,7 +756,7 @@ impl World {
             s.match_fraction,
             self.detector.radii(),
         );
-        times.communication = self.detector.shared_seconds;
+        times.communication = self.detector.shared_seconds + ghost_seconds;
         if self.detector.hold {
             let ex = self.exchange.as_deref().expect("a rank holds pairs");
             let (skeleton, seconds) = Skeleton::gather(ex, &self.contacts);
@@ -751,37 +768,11 @@ impl World {
 
         // 2. Free velocities.
         let b = &self.bodies;
-        let gravity = s.gravity;
-        let t0 = self.time;
+        let (gravity, t0) = (s.gravity, self.time);
         (0..b.len())
             .into_par_iter()
             .with_min_len(256)
-            .map(|i| {
-                if let Some((d, limits)) = force_limited(b, i, t0, t1) {
-                    return limited_free_body(b, i, d, limits, gravity * h, t0, t1);
-                }
-                let (v, w) = match b.kind[i] {
-                    BodyKind::Dynamic => (b.velocity[i] + gravity * h, b.angular_velocity[i]),
-                    BodyKind::Kinematic => match &b.driver[i] {
-                        Some(d) => d.velocity(t1),
-                        None => (DVec3::ZERO, DVec3::ZERO),
-                    },
-                    BodyKind::Fixed => (DVec3::ZERO, DVec3::ZERO),
-                };
-                SolverBody {
-                    v,
-                    w,
-                    inv_mass: if b.kind[i] == BodyKind::Dynamic {
-                        b.inv_mass[i]
-                    } else {
-                        0.0
-                    },
-                    inv_inertia: b.inv_inertia_world(i),
-                    epoch: 0,
-                    drift: 0.0,
-                    version: 0,
-                }
-            })
+            .map(|i| free_body(b, i, gravity, h, t0, t1))
             .collect_into_vec(&mut self.scratch.solver_bodies);
         self.drives.clear();
         for i in 0..b.len() {
@@ -852,6 +843,29 @@ impl World {
         }
     }
 
+    /// Takes in, on a rank that holds its pairs, the dynamic bodies its part of the solve
+    /// reads and it was not sent as ghosts — those of its subdomains under `owners` (the
+    /// solve's) and of the contacts it holds — and makes their solver bodies (a collective).
+    /// Returns the seconds spent sharing.
+    fn fetch_solved(&mut self, ex: &dyn Exchange, owners: &PairOwners) -> f64 {
+        let (me, n, c) = (ex.rank(), self.bodies.len(), &self.contacts);
+        let mut held = vec![false; n];
+        for k in 0..c.len() {
+            held[c.body1[k] as usize] = true;
+            held[c.body2[k] as usize] = true;
+        }
+        let needed = |i: usize| held[i] || ghosts::owner_of(owners, i) == me;
+        let (got, seconds) = self.detector.fetch(ex, &mut self.bodies, needed);
+        let s = &self.settings;
+        let (h, t0) = (s.dt, self.time);
+        for i in got {
+            let sb = free_body(&self.bodies, i, s.gravity, h, t0, t0 + h);
+            self.scratch.free_w[i] = sb.w;
+            self.scratch.solver_bodies[i] = sb;
+        }
+        seconds
+    }
+
     /// Advances one time step.
     pub fn step(&mut self) -> StepReport {
         // A step [`World::detect`] prepared has its local problems; otherwise the domain
@@ -873,7 +887,9 @@ impl World {
         };
         let mut lap = Lap::start();
         let nlgs = self.nlgs();
-        let s = &self.settings;
+        // A copy: the solve's ranks take in bodies (`World::fetch_solved`) while it is read.
+        let settings = self.settings.clone();
+        let s = &settings;
         let (h, theta) = (s.dt, s.theta);
         // With the overlap recovery the law owns the elastic deflection; without it, the
         // correction heals whole overlaps as before.
@@ -932,6 +948,8 @@ impl World {
                     let owners = ws.pair_owners(&partition, ex.size(), attach);
                     times.communication += self.detector.migrate(&*ex, &owners);
                     times.communication += self.contacts.migrate(&*ex, &owners);
+                    // The bodies this solve gives the rank that it was not sent as ghosts.
+                    times.communication += self.fetch_solved(&*ex, &owners);
                     self.skeleton.locate(&self.contacts);
                     debug_assert!(self
                         .skeleton
@@ -1150,6 +1168,35 @@ fn add_to<T: Copy + std::ops::AddAssign>(table: &mut Vec<(u32, T)>, body: u32, x
 
 /// The driver of body `i` and its bounds over the step from `t0` to `t1` if it is driven (not
 /// yet released) with a force limit.
+/// Body `i`'s solver body at the start of the step `t0 → t1` (of length `h`): its free
+/// velocity (gravity added, a driven body's program) and inverse inertia.
+fn free_body(b: &BodySet, i: usize, gravity: DVec3, h: f64, t0: f64, t1: f64) -> SolverBody {
+    if let Some((d, limits)) = force_limited(b, i, t0, t1) {
+        return limited_free_body(b, i, d, limits, gravity * h, t0, t1);
+    }
+    let (v, w) = match b.kind[i] {
+        BodyKind::Dynamic => (b.velocity[i] + gravity * h, b.angular_velocity[i]),
+        BodyKind::Kinematic => match &b.driver[i] {
+            Some(d) => d.velocity(t1),
+            None => (DVec3::ZERO, DVec3::ZERO),
+        },
+        BodyKind::Fixed => (DVec3::ZERO, DVec3::ZERO),
+    };
+    SolverBody {
+        v,
+        w,
+        inv_mass: if b.kind[i] == BodyKind::Dynamic {
+            b.inv_mass[i]
+        } else {
+            0.0
+        },
+        inv_inertia: b.inv_inertia_world(i),
+        epoch: 0,
+        drift: 0.0,
+        version: 0,
+    }
+}
+
 fn force_limited(
     b: &BodySet,
     i: usize,

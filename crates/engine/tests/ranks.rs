@@ -262,3 +262,64 @@ fn a_diverging_state_is_named_alike_on_ranks() {
         }
     }
 }
+
+/// Ghosts: between steps a rank needs only the grains it owns. With every other grain's
+/// state spoiled on each rank after every step (NaN poses, velocities and momenta), the
+/// ranks step the pile (with its force-limited paddle) as one process does — the same
+/// solves, contact counts, overlaps and digest, bit for bit — from their own grains, the
+/// ghosts their owners send and the grains a solve moves to them, while grains change rank.
+#[test]
+fn ranks_step_from_their_own_grains_and_the_ghosts_they_are_sent() {
+    use ballast_engine::bodies::BodyKind;
+    use ballast_engine::math::{DQuat, DVec3};
+    type Steps = Vec<(usize, u64, u64, usize, u64, [u32; 2])>;
+    const STEPS: usize = 400;
+    fn make() -> World {
+        pile([2, 2, 1], true, true)
+    }
+    fn spoiled(w: &mut World) -> (Steps, String, usize) {
+        let n = w.bodies.len();
+        let mut owned: Vec<bool> = vec![true; n];
+        let (mut steps, mut changed) = (Vec::new(), 0);
+        for step in 0..STEPS {
+            let r = w.step();
+            let s = &r.solve;
+            steps.push((
+                s.iterations,
+                s.residual.to_bits(),
+                s.quad.to_bits(),
+                r.contacts,
+                r.max_penetration.to_bits(),
+                r.deepest,
+            ));
+            let grains: Vec<usize> = (0..n)
+                .filter(|&i| w.bodies.kind[i] == BodyKind::Dynamic)
+                .collect();
+            for i in grains {
+                let mine = w.answers_for(i);
+                // Grains that change rank after the first solve has dealt them.
+                changed += usize::from(step > 0 && mine != owned[i]);
+                owned[i] = mine;
+                if !mine {
+                    let b = &mut w.bodies;
+                    b.position[i] = DVec3::NAN;
+                    b.orientation[i] = DQuat::from_xyzw(f64::NAN, 0.0, 0.0, 1.0);
+                    b.velocity[i] = DVec3::NAN;
+                    b.angular_velocity[i] = DVec3::NAN;
+                    b.angular_momentum[i] = DVec3::NAN;
+                }
+            }
+        }
+        (steps, w.state_digest(), changed)
+    }
+    let (steps, digest, _) = spoiled(&mut make());
+    for k in [2, 3] {
+        for (rank, (s, d, changed)) in with_ranks(k, make, spoiled).into_iter().enumerate() {
+            for (j, (a, b)) in steps.iter().zip(&s).enumerate() {
+                assert_eq!(a, b, "{k} ranks, rank {rank}, step {}", j + 1);
+            }
+            assert_eq!(d, digest, "{k} ranks, rank {rank}");
+            assert!(changed > 0, "{k} ranks, rank {rank}: no grain changed rank");
+        }
+    }
+}

@@ -343,3 +343,52 @@ fn a_part_that_cannot_be_written_fails_the_checkpoint_on_every_rank() {
     assert!(!manifest.exists(), "a manifest without its parts");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// What an output computes over every body — the kinetic energy, the state digest — each rank
+/// computes from the bodies it answers for, gathered in body order: with every other body's
+/// state spoiled on each rank (NaN positions, huge velocities), every rank gives one process's
+/// bits, and each body is answered for by exactly one rank.
+#[test]
+fn outputs_over_every_body_read_only_its_owners() {
+    use ballast_engine::math::{DQuat, DVec3};
+    let at = 200;
+    let mut alone = make();
+    steps(&mut alone, at);
+    let energy = alone.kinetic_energy();
+    assert_eq!(energy.to_bits(), alone.bodies.kinetic_energy().to_bits());
+    assert_eq!(alone.state_digest(), state_digest(&alone.bodies));
+    let expect = (energy.to_bits(), alone.state_digest());
+    let n = alone.bodies.len();
+    for k in [2, 3] {
+        let got = on_ranks(k, move |_, w| {
+            steps(w, at);
+            let answered: Vec<usize> = (0..n).filter(|&i| w.answers_for(i)).collect();
+            let b = &mut w.bodies;
+            for i in (0..n).filter(|i| !answered.contains(i)) {
+                b.position[i] = DVec3::NAN;
+                b.orientation[i] = DQuat::from_xyzw(0.5, 0.5, 0.5, 0.5);
+                b.velocity[i] = DVec3::splat(1e300);
+                b.angular_velocity[i] = DVec3::splat(-1e300);
+                b.angular_momentum[i] = DVec3::splat(1e300);
+            }
+            let spoiled = state_digest(&w.bodies);
+            (
+                (w.kinetic_energy().to_bits(), w.state_digest()),
+                spoiled,
+                answered,
+            )
+        });
+        let mut owners = vec![0; n];
+        for (r, (values, spoiled, answered)) in got.iter().enumerate() {
+            assert_eq!(values, &expect, "rank {r} of {k}");
+            assert_ne!(spoiled, &expect.1, "rank {r} of {k}: nothing spoiled");
+            let dynamic = answered
+                .iter()
+                .filter(|&&i| alone.bodies.kind[i] == BodyKind::Dynamic)
+                .count();
+            assert!(dynamic > 0, "rank {r} of {k} answers for no grain");
+            answered.iter().for_each(|&i| owners[i] += 1);
+        }
+        assert!(owners.iter().all(|&o| o == 1), "{k} ranks: {owners:?}");
+    }
+}

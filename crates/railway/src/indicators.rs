@@ -24,13 +24,13 @@
 //!   step while it lets the block down (within `±lowering_force`, falling to zero; see
 //!   [`crate::tamping`]), 0 while the block is held kinematically or free.
 
-use crate::compacity::solid_volume;
+use crate::compacity::clipped_volume;
 use crate::scene::Layout;
 use crate::track::{Aabb, TrackSpec};
-use ballast_engine::bodies::BodySet;
+use ballast_engine::bodies::{BodySet, BodyValues};
 use ballast_engine::math::DVec3;
+use ballast_engine::shapes::Shape;
 use ballast_engine::world::World;
-use rayon::prelude::*;
 use std::ops::Range;
 
 /// The indicators of one track model.
@@ -126,16 +126,37 @@ impl Indicators {
         &self.volumes
     }
 
-    /// Values for the current state of `world`, in column order.
+    /// Values for the current state of `world`, in column order. On ranks that share the
+    /// bodies, a collective: what it reads of the grains, the blocks and the tines comes from
+    /// the rank that answers for each ([`World::gather_body_values`]).
     pub fn values(&self, world: &World) -> Vec<f64> {
         let b = &world.bodies;
-        let g = &self.grains;
-        let mut out: Vec<f64> = self
-            .volumes
-            .par_iter()
-            .map(|v| solid_volume(b, |i| g.contains(&i), v.min, v.max) / v.volume())
+        let read = self.read_bodies(world);
+        // Each control volume's solid volume: its grains' clipped volumes summed in body
+        // order, as [`crate::compacity::solid_volume`] sums them (the grains outside add 0).
+        let mut solid = vec![0.0; self.volumes.len()];
+        // The blocks' and blades' positions, in body order.
+        let mut placed: Vec<(usize, DVec3)> = Vec::new();
+        for (i, v) in read.iter() {
+            if self.grains.contains(&i) {
+                for kv in v.chunks_exact(2) {
+                    solid[kv[0] as usize] += kv[1];
+                }
+            } else {
+                placed.push((i, DVec3::new(v[0], v[1], v[2])));
+            }
+        }
+        let at = |i: usize| {
+            placed
+                .binary_search_by_key(&i, |&(j, _)| j)
+                .map_or(DVec3::NAN, |k| placed[k].1)
+        };
+        let mut out: Vec<f64> = solid
+            .iter()
+            .zip(&self.volumes)
+            .map(|(s, v)| s / v.volume())
             .collect();
-        out.extend(self.blocks.iter().map(|&i| b.position[i].z));
+        out.extend(self.blocks.iter().map(|&i| at(i).z));
         let ids: Vec<u32> = self.tines.iter().flatten().map(|&i| i as u32).collect();
         // The tines' contacts, from every rank, in pair order (the sums a single process
         // makes).
@@ -155,7 +176,7 @@ impl Indicators {
             out.push(f.z);
         }
         for (j, [blade, _]) in self.tines.iter().enumerate() {
-            let moved = b.position[*blade] - self.tine_starts[j];
+            let moved = at(*blade) - self.tine_starts[j];
             let commanded = b.driver[*blade].as_ref().map_or(DVec3::ZERO, |d| {
                 commanded_displacement(d, h, world.settings.theta, world.step_index)
             });
@@ -168,6 +189,30 @@ impl Indicators {
             out.push(d.map_or(0.0, |d| d.impulse_v.z / h));
         }
         out
+    }
+
+    /// What [`Indicators::values`] reads of the bodies, each from the rank that answers for
+    /// it: of each grain, the control volumes it reaches, as (volume, clipped volume) pairs;
+    /// of each block and tine blade, its position.
+    fn read_bodies(&self, world: &World) -> BodyValues {
+        let b = &world.bodies;
+        let blades: Vec<usize> = self.tines.iter().map(|[blade, _]| *blade).collect();
+        world.gather_body_values(|i, out| {
+            if self.grains.contains(&i) {
+                let Shape::Polyhedron(p) = &b.shape[i] else {
+                    return;
+                };
+                let (x, q) = (b.position[i], b.orientation[i]);
+                for (k, v) in self.volumes.iter().enumerate() {
+                    let solid = clipped_volume(p, x, q, v.min, v.max);
+                    if solid != 0.0 {
+                        out.extend([k as f64, solid]);
+                    }
+                }
+            } else if self.blocks.contains(&i) || blades.contains(&i) {
+                out.extend(b.position[i].to_array());
+            }
+        })
     }
 
     /// Mean number of grain–grain contacts per grain.

@@ -599,9 +599,8 @@ fn deposit(
         progress,
     );
     let mut simulated = world.time;
-    for (g, i) in grains.iter_mut().zip(layout.grains.clone()) {
-        g.position = world.bodies.position[i];
-        g.orientation = world.bodies.orientation[i];
+    for (g, (p, q)) in grains.iter_mut().zip(poses(&world, layout.grains.clone())) {
+        (g.position, g.orientation) = (p, q);
     }
 
     // Excavate the blocks and trim above the block tops.
@@ -659,9 +658,8 @@ fn heal_and_keep(
     progress: &mut dyn FnMut(PrepProgress),
 ) -> PreparedSample {
     let healed = heal(world, prep, bodies.clone(), progress);
-    for (g, i) in grains.iter_mut().zip(bodies.clone()) {
-        g.position = world.bodies.position[i];
-        g.orientation = world.bodies.orientation[i];
+    for (g, (p, q)) in grains.iter_mut().zip(poses(world, bodies.clone())) {
+        (g.position, g.orientation) = (p, q);
     }
     let first = bodies.start;
     let mut j = 0;
@@ -1018,21 +1016,42 @@ fn rest_quantile(world: &World) -> f64 {
     *all.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
-/// Speed of each dynamic body, rotation included at its circumscribed radius (m/s).
+/// Speed of each dynamic body, rotation included at its circumscribed radius (m/s), in body
+/// order, each from the rank that answers for it (on ranks, a collective).
 fn grain_speeds(world: &World) -> Vec<f64> {
     let b = &world.bodies;
-    let mut out = Vec::with_capacity(b.len());
-    for i in 0..b.len() {
+    let speeds = world.gather_body_values(|i, out| {
         if b.kind[i] != ballast_engine::bodies::BodyKind::Dynamic {
-            continue;
+            return;
         }
         let r = match &b.shape[i] {
             Shape::Polyhedron(p) => p.radius,
             Shape::Plane { .. } => 0.0,
         };
         out.push(b.velocity[i].length() + b.angular_velocity[i].length() * r);
-    }
-    out
+    });
+    speeds.iter().map(|(_, v)| v[0]).collect()
+}
+
+/// The poses of the bodies `bodies`, each from the rank that answers for it (on ranks, a
+/// collective).
+fn poses(world: &World, bodies: std::ops::Range<usize>) -> Vec<(DVec3, DQuat)> {
+    let b = &world.bodies;
+    let got = world.gather_body_values(|i, out| {
+        if bodies.contains(&i) {
+            let (p, q) = (b.position[i], b.orientation[i]);
+            out.extend([p.x, p.y, p.z, q.x, q.y, q.z, q.w]);
+        }
+    });
+    debug_assert_eq!(got.len(), bodies.len());
+    got.iter()
+        .map(|(_, v)| {
+            (
+                DVec3::new(v[0], v[1], v[2]),
+                DQuat::from_xyzw(v[3], v[4], v[5], v[6]),
+            )
+        })
+        .collect()
 }
 
 /// The cache file: magic, format, key, report (JSON), then per kept grain its index in the

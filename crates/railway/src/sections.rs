@@ -161,7 +161,8 @@ impl Sections {
         self.moments.iter().filter(move |m| m.step == step)
     }
 
-    /// The grains of `world` in the slab of `plane`, in body order.
+    /// The grains of `world` in the slab of `plane`, in body order. On ranks that share the
+    /// bodies, a collective (each grain read on the rank that answers for it).
     pub fn points(&self, world: &World, plane: &Plane) -> Vec<SectionPoint> {
         let b = &world.bodies;
         let h = world.settings.dt;
@@ -173,13 +174,21 @@ impl Sections {
             }
         };
         let in_slab = |i: usize| self.grains.contains(&i) && offset(i).0.abs() <= SLAB_HALF_WIDTH;
+        // The slab's grains, each from the rank that answers for it.
+        let rows = world.gather_body_values(|i, out| {
+            if in_slab(i) {
+                out.extend([offset(i).1, b.position[i].z, b.velocity[i].length()]);
+            }
+        });
+        let slab: Vec<usize> = rows.iter().map(|(i, _)| i).collect();
+        let member = |i: u32| slab.binary_search(&(i as usize)).is_ok();
         let mut load = vec![0.0; self.grains.len()];
         // The loaded contacts of the slab's grains, from every rank, in pair order (each
         // grain's load sums them in a single process's order; the rest of the bed's contacts
         // stay where they are held).
         let c = &world.gather_contacts(|c, k| {
             (c.impulse[k].x > 0.0 || c.impulse[k].x.is_nan())
-                && (in_slab(c.body1[k] as usize) || in_slab(c.body2[k] as usize))
+                && (member(c.body1[k]) || member(c.body2[k]))
         });
         for (k, r) in c.impulse.iter().enumerate() {
             if r.x <= 0.0 {
@@ -192,17 +201,13 @@ impl Sections {
                 }
             }
         }
-        self.grains
-            .clone()
-            .filter_map(|i| {
-                let (off, u) = offset(i);
-                (off.abs() <= SLAB_HALF_WIDTH).then(|| SectionPoint {
-                    grain: i,
-                    u,
-                    z: b.position[i].z,
-                    speed: b.velocity[i].length(),
-                    load: load[i - self.grains.start],
-                })
+        rows.iter()
+            .map(|(i, v)| SectionPoint {
+                grain: i,
+                u: v[0],
+                z: v[1],
+                speed: v[2],
+                load: load[i - self.grains.start],
             })
             .collect()
     }

@@ -231,3 +231,85 @@ fn full_cycle_compacts_the_ballast_under_the_block() {
     let n = s.steps();
     assert_eq!(m.world.step_index, n);
 }
+
+/// Ranks keep up to date only the grains they own (the others arrive as ghosts when a rank
+/// needs them), and the indicators and the sections read each grain on its owner: on 2 and
+/// 3 in-process ranks, with every other grain's state spoiled on each rank after every step
+/// of the start of the cycle (the lift, the tines going down into the ballast), the run,
+/// its indicators and its sections are one process's, bit for bit.
+#[test]
+fn ranks_step_the_track_from_their_own_grains_and_read_each_from_its_owner() {
+    use ballast_engine::math::DQuat;
+    use ballast_engine::solver::{Exchange, ThreadRanks};
+    use ballast_railway::sections::{section_csv, Sections};
+    use std::sync::Arc;
+    const STEPS: u64 = 150;
+    prepared();
+    /// The indicators' bits and each section's CSV after `STEPS` steps, other ranks' bodies
+    /// spoiled first.
+    fn outputs(exchange: Option<Arc<dyn Exchange>>) -> (Vec<u64>, Vec<String>, usize, String) {
+        use ballast_engine::bodies::BodyKind;
+        let s = mini();
+        let mut m = s.build(Some(&cache_dir()), &mut |_| {}).unwrap();
+        m.world.set_exchange(exchange);
+        let mut others = Vec::new();
+        while m.world.step_index < STEPS {
+            m.world.step();
+            let w = &mut m.world;
+            let n = w.bodies.len();
+            let kind = &w.bodies.kind;
+            others = (0..n)
+                .filter(|&i| kind[i] == BodyKind::Dynamic && !w.answers_for(i))
+                .collect();
+            for &i in &others {
+                w.bodies.position[i] = DVec3::NAN;
+                w.bodies.orientation[i] = DQuat::from_xyzw(0.5, 0.5, 0.5, 0.5);
+                w.bodies.velocity[i] = DVec3::splat(1e300);
+                w.bodies.angular_velocity[i] = DVec3::NAN;
+                w.bodies.angular_momentum[i] = DVec3::NAN;
+            }
+        }
+        let values = m.indicators.values(&m.world);
+        let sections = Sections::new(
+            &s.track,
+            s.tamping.tine_y[0],
+            &m.layout,
+            &m.cycle,
+            &s.tamping.blocks,
+            s.simulation.dt,
+            STEPS,
+        );
+        let csv = sections
+            .planes
+            .iter()
+            .map(|p| section_csv(&sections.points(&m.world, p)))
+            .collect();
+        let digest = m.world.state_digest();
+        let bits = values.iter().map(|v| v.to_bits()).collect();
+        (bits, csv, others.len(), digest)
+    }
+    let (values, csv, none, digest) = outputs(None);
+    assert_eq!(none, 0);
+    assert!(values.iter().all(|v| f64::from_bits(*v).is_finite()));
+    assert!(csv.iter().all(|c| c.lines().count() > 10), "{csv:?}");
+    for k in [2, 3] {
+        let got: Vec<_> = ThreadRanks::group(k)
+            .into_iter()
+            .map(|r| {
+                std::thread::spawn(move || {
+                    let ex: Arc<dyn Exchange> = Arc::new(r);
+                    outputs(Some(ex))
+                })
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
+            .map(|h| h.join().unwrap())
+            .collect();
+        for (r, (v, c, spoiled, d)) in got.iter().enumerate() {
+            assert!(*spoiled > 0, "rank {r} of {k}: nothing spoiled");
+            assert_eq!(d, &digest, "rank {r} of {k}: the run");
+            assert_eq!(v, &values, "rank {r} of {k}: indicators");
+            assert_eq!(c, &csv, "rank {r} of {k}: sections");
+        }
+    }
+}

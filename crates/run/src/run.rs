@@ -720,7 +720,8 @@ impl Job {
         // control volume: not worth computing twice).
         let mut last_indicators: Option<(u64, Vec<f64>)> = None;
         let mut row = |r: &StepReport, world: &World, healthy: bool| {
-            let mut line = series_row(r, world.bodies.kinetic_energy());
+            // Gathered from the bodies' owners: the other ranks take part ([`Job::follow`]).
+            let mut line = series_row(r, world.kinetic_energy());
             if let Some(t) = track {
                 // A diverged state's indicators mean nothing (and its grains may be NaN).
                 let values = if healthy {
@@ -940,7 +941,7 @@ impl Job {
             Some((step, v)) if step == world.step_index => Some(v),
             _ => None,
         };
-        let mut value = summary_json(world, stats, o.threads, track, finals, None)?;
+        let mut value = summary_value(&summary, world, track, finals, None)?;
         if interrupted {
             value["status"] = "interrupted".into();
         }
@@ -1023,6 +1024,8 @@ impl Job {
             // others: each rank makes the same collective calls, in the same order.
             initial_warnings(world, OVERLAP_REPORT, OVERLAP_LINES as usize / 4);
             if let Err(d) = self.health.initial().check(world) {
+                // Rank 0's summary of the diverged state.
+                summary_json(world, &self.stats, o.threads, &self.track, None, Some(&d))?;
                 return Err(diverged(&d, out, names));
             }
         }
@@ -1032,12 +1035,16 @@ impl Job {
             let r = world.step();
             self.stats.add(&r);
             if let Err(d) = self.health.check(world) {
+                // Rank 0's row (its indicators left out) and summary of the diverged state.
+                world.kinetic_energy();
+                summary_json(world, &self.stats, o.threads, &self.track, None, Some(&d))?;
                 return Err(diverged(&d, out, names));
             }
             let k = r.step;
             // Rank 0's series row and sections (see above).
-            if let Some(t) = &self.track {
-                if k.is_multiple_of(self.output_interval) || k == steps {
+            if k.is_multiple_of(self.output_interval) || k == steps {
+                world.kinetic_energy();
+                if let Some(t) = &self.track {
                     last_indicators = Some((k, t.indicators.values(world)));
                 }
             }
@@ -1212,6 +1219,9 @@ fn diverged(d: &Divergence, out: &Path, names: &ArgNames) -> Failure {
 /// `summary.json`: the engine's [`Summary`], `status` (`"completed"`, or `"diverged"` with the
 /// `divergence`), and for track runs `grains`, the final `indicators` (`finals`, when already
 /// computed for this step), `preparation` and `cycle`.
+///
+/// The summary and the indicators are gathered from the bodies' and contacts' owners: every
+/// rank of a distributed run calls this at the same point ([`Job::follow`]).
 fn summary_json(
     world: &World,
     stats: &RunStats,
@@ -1221,7 +1231,18 @@ fn summary_json(
     diverged: Option<&Divergence>,
 ) -> Result<serde_json::Value, String> {
     let summary = Summary::new(world, stats, threads);
-    let mut value = serde_json::to_value(&summary).map_err(|e| e.to_string())?;
+    summary_value(&summary, world, track, finals, diverged)
+}
+
+/// [`summary_json`] of a summary already made.
+fn summary_value(
+    summary: &Summary,
+    world: &World,
+    track: &Option<TrackParts>,
+    finals: Option<Vec<f64>>,
+    diverged: Option<&Divergence>,
+) -> Result<serde_json::Value, String> {
+    let mut value = serde_json::to_value(summary).map_err(|e| e.to_string())?;
     let Some(map) = value.as_object_mut() else {
         return Ok(value);
     };

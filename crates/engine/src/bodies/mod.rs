@@ -8,6 +8,8 @@
 pub mod driver;
 mod ranks;
 
+pub use ranks::BodyValues;
+
 pub use driver::{Driver, Limits, Profile, Term, Velocities};
 
 use crate::math::{DMat3, DQuat, DVec3};
@@ -235,15 +237,19 @@ impl BodySet {
         r * DMat3::from_diagonal(self.inertia[i].recip()) * r.transpose()
     }
 
-    /// Kinetic energy of the dynamic bodies.
+    /// Kinetic energy of the dynamic bodies: their [`BodySet::kinetic_energy_of`] summed in
+    /// body order.
     pub fn kinetic_energy(&self) -> f64 {
         (0..self.len())
             .filter(|&i| self.kind[i] == BodyKind::Dynamic)
-            .map(|i| {
-                0.5 * self.mass(i) * self.velocity[i].length_squared()
-                    + 0.5 * self.angular_velocity[i].dot(self.angular_momentum[i])
-            })
+            .map(|i| self.kinetic_energy_of(i))
             .sum()
+    }
+
+    /// Kinetic energy of body `i`, translation and rotation: `½ m |v|² + ½ ω · L`.
+    pub fn kinetic_energy_of(&self, i: usize) -> f64 {
+        0.5 * self.mass(i) * self.velocity[i].length_squared()
+            + 0.5 * self.angular_velocity[i].dot(self.angular_momentum[i])
     }
 }
 

@@ -5,6 +5,7 @@
 
 mod broad;
 pub mod coherence;
+pub(crate) mod ghosts;
 mod outcomes;
 mod ranks;
 // Narrow-phase routines, exposed for the crate's tests and benches; not part of the supported
@@ -92,6 +93,13 @@ pub struct Detector {
     /// The rank that tests each pair in a domain-decomposed distributed run (set before its
     /// first detection, then by each solve).
     pub(crate) owners: Option<PairOwners>,
+    /// The bodies up to date on this rank this step when the ranks share the bodies (its
+    /// own, the ghosts it was sent, the bodies that are not dynamic; see [`ghosts`]); empty:
+    /// every body.
+    pub(crate) fresh: Vec<bool>,
+    /// Each subdomain's extent as its owner bounds it this step (see [`ghosts`]); empty:
+    /// found from every body's bound.
+    pub(crate) extents: Vec<Aabb>,
     /// Whether this rank of a distributed run holds its pairs: it tests and keeps the
     /// outcomes of its own pairs only, and writes only their points (see [`ranks`]); else
     /// every rank gets every outcome.
@@ -145,6 +153,17 @@ impl PairGeometry {
     fn points(&self) -> &[ManifoldPoint] {
         &self.points[..self.len as usize]
     }
+}
+
+/// How far beyond its margin a body's pairs are looked for: the reuse distance's slack.
+fn reach_of(reuse: f64) -> impl Fn(f64) -> f64 + Sync + Copy {
+    move |m: f64| if reuse > 0.0 { reuse + m.max(reuse) } else { m }
+}
+
+/// Half-side of a body's bound (circumradius `radius`, growth `0.5 alert + reach`), widened
+/// by a hair for rounding.
+fn bound_half(radius: f64, alert: f64, reach: f64) -> f64 {
+    (radius + 0.5 * alert + reach) * (1.0 + 1e-9) + 1e-9
 }
 
 impl Detector {
@@ -364,7 +383,7 @@ impl Detector {
         let half: Vec<f64> = (0..radii.len())
             .into_par_iter()
             .with_min_len(1024)
-            .map(|i| (radii[i] + 0.5 * alert + reach(margins[i])) * (1.0 + 1e-9) + 1e-9)
+            .map(|i| bound_half(radii[i], alert, reach(margins[i])))
             .collect();
         let bounds = |grow: f64| -> Vec<Aabb> {
             half.par_iter()
@@ -376,7 +395,8 @@ impl Detector {
                 })
                 .collect()
         };
-        let needed = ranks::bodies_needed(owners, ex.rank(), &bounds(0.0));
+        let extents = &self.extents;
+        let needed = ranks::bodies_needed(owners, ex.rank(), &bounds(0.0), extents);
         let placed = &self.cache.placed;
         if needed.is_empty() {
             return needed;
@@ -389,8 +409,30 @@ impl Detector {
             true => 0.0,
             false => 0.5 * broad::median(&mut finite),
         };
-        // Growing every bound grows every region: a superset of the needed bodies.
-        ranks::bodies_needed(owners, ex.rank(), &bounds(slack))
+        // Growing every bound and every subdomain's bound grows every region: a superset of
+        // the needed bodies (a placement, whatever it holds beyond them, changes no result).
+        let grown: Vec<Aabb> = extents
+            .iter()
+            .map(|e| match e.is_empty() {
+                true => *e,
+                false => Aabb {
+                    min: e.min - DVec3::splat(slack),
+                    max: e.max + DVec3::splat(slack),
+                },
+            })
+            .collect();
+        ranks::bodies_needed(owners, ex.rank(), &bounds(slack), &grown)
+    }
+
+    /// Body `i`'s bound for [`Detector::bodies_to_place`] (grown by nothing): the cube about
+    /// its anchor position that holds its detection box.
+    pub(crate) fn bound(&self, i: usize, alert: f64, reuse: f64) -> Aabb {
+        let h = bound_half(self.cache.radii[i], alert, reach_of(reuse)(self.margins[i]));
+        let x = self.anchors.position[i];
+        Aabb {
+            min: x - DVec3::splat(h),
+            max: x + DVec3::splat(h),
+        }
     }
 
     /// Detects all contact points within the alert distance of touching, appended to `out`
@@ -417,7 +459,13 @@ impl Detector {
         reuse: f64,
         out: &mut Vec<RawContact>,
     ) {
-        out.clear();
+        let layout_changed = self.begin(bodies, alert, dt, reuse);
+        self.finish(bodies, alert, reuse, layout_changed, out);
+    }
+
+    /// The first part of [`Detector::detect`]: the margins and the anchors (each body's own);
+    /// returns whether the bodies' layout changed.
+    pub(crate) fn begin(&mut self, bodies: &BodySet, alert: f64, dt: f64, reuse: f64) -> bool {
         let n = bodies.len();
         let layout_changed = self.refresh_layout(bodies);
         let radii = &self.cache.radii;
@@ -449,8 +497,35 @@ impl Detector {
             reuse,
             layout_changed,
         );
-        let reach = |m: f64| if reuse > 0.0 { reuse + m.max(reuse) } else { m };
-        let active = self.bodies_to_place(alert, reach);
+        layout_changed
+    }
+
+    /// The rest of [`Detector::detect`], after [`Detector::begin`]: placement, the broad and
+    /// the narrow phase.
+    pub(crate) fn finish(
+        &mut self,
+        bodies: &BodySet,
+        alert: f64,
+        reuse: f64,
+        layout_changed: bool,
+        out: &mut Vec<RawContact>,
+    ) {
+        out.clear();
+        let n = bodies.len();
+        let reach = reach_of(reuse);
+        let mut active = self.bodies_to_place(alert, reach);
+        // Only the bodies up to date on this rank are placed: the others are not read.
+        if !self.fresh.is_empty() {
+            if active.is_empty() {
+                active.clone_from(&self.fresh);
+            } else {
+                active
+                    .iter_mut()
+                    .zip(&self.fresh)
+                    .for_each(|(a, f)| *a &= f);
+            }
+        }
+        self.extents.clear();
         let fresh = self.place(&active, layout_changed);
         let all = std::mem::take(&mut self.geometry_stale);
         self.refresh_geometry(bodies, all, &active, &fresh);

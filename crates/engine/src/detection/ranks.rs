@@ -97,14 +97,59 @@ pub(super) fn keep_own(ex: &dyn Exchange, owners: &PairOwners, pairs: &mut Vec<(
 /// overlap; a pair across subdomains with no group is held with the lower one, whose region
 /// holds one bound and so meets the other. Empty when every body is (a sequential interface
 /// this rank holds).
-pub(super) fn bodies_needed(owners: &PairOwners, me: usize, bound: &[Aabb]) -> Vec<bool> {
+/// `extents`: each subdomain's bound as its owner found it ([`subdomain_extents`] over its
+/// bodies), or empty to find them from `bound`.
+pub(super) fn bodies_needed(
+    owners: &PairOwners,
+    me: usize,
+    bound: &[Aabb],
+    extents: &[Aabb],
+) -> Vec<bool> {
+    let found;
+    let extent = match extents.is_empty() {
+        true => {
+            found = subdomain_extents(owners, bound, |_| true);
+            &found
+        }
+        false => extents,
+    };
+    let Some(regions) = regions(owners, me, extent) else {
+        return Vec::new();
+    };
+    bound
+        .par_iter()
+        .enumerate()
+        .with_min_len(1024)
+        .map(|(i, b)| needs(owners, &regions, i, b))
+        .collect()
+}
+
+/// Whether a rank of `regions` ([`regions`]) needs body `i` of bound `b`.
+pub(super) fn needs(owners: &PairOwners, regions: &[Aabb], i: usize, b: &Aabb) -> bool {
+    owners.subdomain(i) == STATIC || regions.iter().any(|r| r.overlaps(b))
+}
+
+/// The bound of each subdomain whose bodies `counted` takes: the union of their bounds (a
+/// body of NaN bounds adds nothing: its boxes overlap none).
+pub(super) fn subdomain_extents(
+    owners: &PairOwners,
+    bound: &[Aabb],
+    counted: impl Fn(usize) -> bool,
+) -> Vec<Aabb> {
     let mut extent = vec![Aabb::EMPTY; owners.count()];
-    // A body of NaN bounds has no pair (its boxes overlap none).
     for (i, b) in bound.iter().enumerate().filter(|(_, b)| !b.is_empty()) {
         if let Some(e) = extent.get_mut(owners.subdomain(i) as usize) {
-            *e = e.union(b);
+            if counted(i) {
+                *e = e.union(b);
+            }
         }
     }
+    extent
+}
+
+/// Rank `me`'s regions ([`bodies_needed`]) from the subdomains' `extent`s; `None` when it
+/// needs every body (it holds the sequential interface).
+pub(super) fn regions(owners: &PairOwners, me: usize, extent: &[Aabb]) -> Option<Vec<Aabb>> {
     let mut regions: Vec<Aabb> = (0..owners.count())
         .filter(|&s| owners.of_subdomain(s) == me)
         .map(|s| extent[s])
@@ -114,17 +159,12 @@ pub(super) fn bodies_needed(owners: &PairOwners, me: usize, bound: &[Aabb]) -> V
             continue;
         }
         if a == STATIC {
-            return Vec::new();
+            return None;
         }
         regions.push(extent[a as usize].intersection(&extent[b as usize]));
     }
     regions.retain(|r| !r.is_empty());
-    bound
-        .par_iter()
-        .enumerate()
-        .with_min_len(1024)
-        .map(|(i, b)| owners.subdomain(i) == STATIC || regions.iter().any(|r| r.overlaps(b)))
-        .collect()
+    Some(regions)
 }
 
 impl Detector {
@@ -349,7 +389,7 @@ mod tests {
                 .map(|(b, &x)| boxes(x, DVec3::new(b.1 .0, b.1 .1, b.1 .2)))
                 .unzip();
             for me in 0..size {
-                let needed = bodies_needed(&owners, me, &bound);
+                let needed = bodies_needed(&owners, me, &bound, &[]);
                 let need = |i: usize| needed.is_empty() || needed[i];
                 for i in 0..x.len() {
                     for j in i + 1..x.len() {
@@ -373,7 +413,7 @@ mod tests {
         let partition = Partition::build(&x, &[true; 16], [4, 1, 1], Balance::Volume, &[1.0; 16]);
         let owners = PairOwners::new(&partition, vec![((1, 2), 1)], 2, &[]);
         let bound: Vec<Aabb> = x.iter().map(|&x| boxes(x, DVec3::splat(0.05)).1).collect();
-        let needed = |me| bodies_needed(&owners, me, &bound);
+        let needed = |me| bodies_needed(&owners, me, &bound, &[]);
         // Rank 0 holds slabs 0 and 1 (grains 0–7); rank 1 slabs 2, 3 and the group between
         // slabs 1 and 2. Grains are 0.25 m apart, their bounds 0.17 m wide: a slab's bodies'
         // extent reaches no other slab's grain.
@@ -382,9 +422,9 @@ mod tests {
         assert_eq!(needed(1), (0..16).map(|i| i >= 8).collect::<Vec<_>>());
         // Wider grains (bounds 0.35 m wide) reach their neighbours: each rank needs one more.
         let bound: Vec<Aabb> = x.iter().map(|&x| boxes(x, DVec3::splat(0.1)).1).collect();
-        let wide = bodies_needed(&owners, 0, &bound);
+        let wide = bodies_needed(&owners, 0, &bound, &[]);
         assert_eq!(wide, (0..16).map(|i| i < 9).collect::<Vec<_>>());
-        let wide = bodies_needed(&owners, 1, &bound);
+        let wide = bodies_needed(&owners, 1, &bound, &[]);
         assert_eq!(wide, (0..16).map(|i| i >= 7).collect::<Vec<_>>());
     }
 

@@ -4,7 +4,6 @@ pub mod checkpoint;
 pub(crate) mod shared;
 
 pub mod vtk;
-use crate::digest::state_digest;
 use crate::timing::PhaseTimes;
 use crate::world::{StepReport, World};
 use serde::Serialize;
@@ -114,7 +113,9 @@ pub struct SolverSummary {
 }
 
 impl Summary {
-    /// Summary of `world` after a run with statistics `stats`.
+    /// Summary of `world` after a run with statistics `stats`. Its kinetic energy and digest
+    /// are gathered from the bodies' owners: a collective when the ranks share the bodies
+    /// ([`World::gather_body_values`]).
     pub fn new(world: &World, stats: &RunStats, threads: usize) -> Self {
         Summary {
             steps: world.step_index,
@@ -140,8 +141,8 @@ impl Summary {
                 norm: world.settings.solver.norm,
             },
             max_penetration: stats.max_penetration,
-            kinetic_energy: world.bodies.kinetic_energy(),
-            state_digest: state_digest(&world.bodies),
+            kinetic_energy: world.kinetic_energy(),
+            state_digest: world.state_digest(),
         }
     }
 

@@ -189,6 +189,7 @@ impl VtkWriter {
             return self.write_pieces(world);
         }
         let time = world.time;
+        let scene = scene_box(world);
         let mut appended = false;
         for (k, name) in SERIES.iter().enumerate() {
             let (file, new) = match self.series[k].last() {
@@ -197,8 +198,8 @@ impl VtkWriter {
             };
             let path = self.dir.join(&file);
             match k {
-                0 => write_bodies(&path, world, false, &|_| true),
-                1 => write_bodies(&path, world, true, &|_| true),
+                0 => write_bodies(&path, world, false, &|_| true, scene),
+                1 => write_bodies(&path, world, true, &|_| true, scene),
                 _ => write_contacts(&path, world, &|_| true),
             }
             .map_err(|e| naming(&path, e))?;
@@ -224,6 +225,7 @@ impl VtkWriter {
         // Every rank at this frame before any writes: rank 0 has claimed the folder.
         agree(world, true);
         let owners = Owners::of(world, self.ranks);
+        let scene = scene_box(world);
         let rank = self.rank;
         let mut files = Vec::with_capacity(SERIES.len());
         let mut mine: io::Result<Vec<PArray>> = Ok(Vec::new());
@@ -238,13 +240,15 @@ impl VtkWriter {
                 let written = match k {
                     1 if rank == 0 => {
                         let path = self.dir.join(&file);
-                        write_bodies(&path, world, true, &|_| true).map_err(|e| naming(&path, e))
+                        write_bodies(&path, world, true, &|_| true, scene)
+                            .map_err(|e| naming(&path, e))
                     }
                     1 => Ok(Vec::new()),
                     _ => {
                         let path = self.dir.join(piece_file(&file, rank));
                         if k == 0 {
-                            write_bodies(&path, world, false, &|i| owners.body[i] == rank)
+                            let mine = |i: usize| owners.body[i] == rank;
+                            write_bodies(&path, world, false, &mine, scene)
                         } else {
                             write_contacts(&path, world, &|c| world.holds_contact(c))
                         }
@@ -503,15 +507,23 @@ impl Surface<'_> {
     }
 }
 
-/// Centre and diagonal of the bounding box of the polyhedra (their bounding spheres), if any.
+/// Centre and diagonal of the bounding box of the polyhedra (their bounding spheres), if any:
+/// the frame the planes are drawn in. On ranks that share the bodies, each rank bounds the
+/// bodies it answers for and the boxes are combined: a collective.
 fn scene_box(world: &World) -> Option<(DVec3, f64)> {
     let b = &world.bodies;
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
-    for (shape, &p) in b.shape.iter().zip(&b.position) {
-        if let Shape::Polyhedron(poly) = shape {
-            lo = lo.min(p - DVec3::splat(poly.radius));
-            hi = hi.max(p + DVec3::splat(poly.radius));
+    for i in (0..b.len()).filter(|&i| world.answers_for(i)) {
+        if let Shape::Polyhedron(poly) = &b.shape[i] {
+            lo = lo.min(b.position[i] - DVec3::splat(poly.radius));
+            hi = hi.max(b.position[i] + DVec3::splat(poly.radius));
+        }
+    }
+    if world.shares_bodies() {
+        for r in gather(world, &[lo.x, lo.y, lo.z, hi.x, hi.y, hi.z]).chunks_exact(6) {
+            lo = lo.min(DVec3::new(r[0], r[1], r[2]));
+            hi = hi.max(DVec3::new(r[3], r[4], r[5]));
         }
     }
     (lo.x <= hi.x).then(|| ((lo + hi) * 0.5, (hi - lo).length()))
@@ -523,9 +535,9 @@ fn surfaces<'w>(
     world: &'w World,
     others: bool,
     keep: &dyn Fn(usize) -> bool,
+    scene: Option<(DVec3, f64)>,
 ) -> Vec<(usize, Surface<'w>)> {
     let b = &world.bodies;
-    let scene = scene_box(world);
     (0..b.len())
         .filter(|&i| (b.kind[i] != BodyKind::Dynamic) == others && keep(i))
         .map(|i| {
@@ -577,9 +589,10 @@ fn write_bodies(
     world: &World,
     others: bool,
     keep: &dyn Fn(usize) -> bool,
+    scene: Option<(DVec3, f64)>,
 ) -> io::Result<Vec<PArray>> {
     let b = &world.bodies;
-    let parts = surfaces(world, others, keep);
+    let parts = surfaces(world, others, keep, scene);
     let parts = &parts;
     let num_points: usize = parts.iter().map(|(_, s)| s.num_points()).sum();
     let num_cells: usize = parts.iter().map(|(_, s)| s.num_faces()).sum();

@@ -1,8 +1,12 @@
 //! The domain decomposition across processes (MPI ranks): what a DDM solve shares, and with
 //! whom.
 //!
-//! Every process holds every body and steps it the same way; the contacts and the DDM solve
-//! ([`super::ddm`]) are what they split. Rank `r` owns the subdomains [`owner`] gives it
+//! Every process has every body's slot, but a dynamic body is kept up to date only by the
+//! rank that owns it (the owner of its subdomain at the last solve): each step the owners
+//! send the other ranks the bodies those read — ghosts within reach of their regions, and
+//! the bodies a solve moves to them ([`crate::detection::ghosts`]) — and what is computed
+//! over all bodies is gathered from their owners. Bodies that are not dynamic (walls,
+//! drives) are stepped alike everywhere. Rank `r` owns the subdomains [`owner`] gives it
 //! (contiguous blocks of subdomains, a rule of the partition alone) and its share of the
 //! interface groups (balanced colour by colour), and *holds* their pairs (`PairOwners`):
 //! it alone tests them, keeps their manifolds and contacts, warm-starts, builds and sweeps
@@ -12,7 +16,8 @@
 //! phase wrote that another rank reads next: the velocities of the bodies the interface
 //! contacts and the drives touch, each bucket's sums for the stop test, and once a step each
 //! contact's share of the residual's scale. At the end of the solve every rank receives
-//! every body's velocities, so the bodies stay the same on every process. Sharing copies
+//! every body's velocities (the share still to be narrowed to the owners and the ghosts
+//! they send). Sharing copies
 //! values: each bucket is swept with the same arithmetic in the same order as in one
 //! process, so a run over K ranks is bit-identical to a shared-memory run with the same
 //! partition.
@@ -88,6 +93,9 @@ pub fn owner(s: usize, n: usize, size: usize) -> usize {
 pub(crate) struct PairOwners {
     /// Each body's subdomain ([`STATIC`] for the others).
     subdomain: Vec<u32>,
+    /// Each body's subdomain in the partition, where a body is attached to another (empty:
+    /// `subdomain`).
+    placed: Vec<u32>,
     /// Number of subdomains, and of ranks.
     count: usize,
     size: usize,
@@ -109,15 +117,19 @@ impl PairOwners {
     ) -> Self {
         groups.sort_unstable();
         let sequential = groups.first().is_some_and(|g| g.0 .0 == STATIC);
-        let subdomain = match attach.is_empty() {
-            true => partition.subdomain.clone(),
-            false => attach
-                .iter()
-                .map(|&p| partition.subdomain[p as usize])
-                .collect(),
+        let (subdomain, placed) = match attach.is_empty() {
+            true => (partition.subdomain.clone(), Vec::new()),
+            false => (
+                attach
+                    .iter()
+                    .map(|&p| partition.subdomain[p as usize])
+                    .collect(),
+                partition.subdomain.clone(),
+            ),
         };
         PairOwners {
             subdomain,
+            placed,
             count: partition.count(),
             size,
             groups,
@@ -129,6 +141,15 @@ impl PairOwners {
     /// for the bodies of no subdomain).
     pub(crate) fn subdomain(&self, i: usize) -> u32 {
         self.subdomain.get(i).copied().unwrap_or(STATIC)
+    }
+
+    /// Body `i`'s subdomain in the partition of the solve (an attached body's own:
+    /// [`STATIC`]).
+    pub(crate) fn placed(&self, i: usize) -> u32 {
+        match self.placed.is_empty() {
+            true => self.subdomain(i),
+            false => self.placed.get(i).copied().unwrap_or(STATIC),
+        }
     }
 
     /// The number of subdomains.

@@ -14,13 +14,14 @@
 //!
 //! Ranks sharing a run find the same cuts together, each from the bodies it owns and the
 //! contacts it holds (a radix select over sums of per-rank histograms), bit for bit those of
-//! one process.
+//! one process; each rank then places the bodies it owns, and the ranks share the bodies
+//! that changed subdomain.
 
 use crate::math::DVec3;
 use serde::{Deserialize, Serialize};
 
 mod ranks;
-pub(crate) use ranks::shared_cuts;
+pub(crate) use ranks::{shared_cuts, shared_subdomains};
 
 /// Marks a body that belongs to no subdomain (kinematic or fixed).
 pub const STATIC: u32 = u32::MAX;
@@ -119,13 +120,15 @@ impl Partition {
         let n = positions.len();
         let mut subdomain = vec![STATIC; n];
         for i in (0..n).filter(|&i| dynamic[i]) {
-            let mut idx = [0usize; 3];
-            for axis in 0..3 {
-                let x = positions[i][axis];
-                idx[axis] = cuts[axis].partition_point(|&c| c <= x).min(dims[axis] - 1);
-            }
-            subdomain[i] = (idx[0] + dims[0] * (idx[1] + dims[1] * idx[2])) as u32;
+            subdomain[i] = box_of(positions[i], dims, cuts);
         }
+        Self::from_subdomains(dims, subdomain)
+    }
+
+    /// The partition of `dims` whose bodies lie in `subdomain` (each body's box, [`STATIC`]
+    /// for the bodies of none), numbered for the solver.
+    pub(crate) fn from_subdomains(dims: [usize; 3], subdomain: Vec<u32>) -> Self {
+        let n = subdomain.len();
         // Counting sort by subdomain (stable: body order within a subdomain).
         let k = dims.iter().product::<usize>();
         let mut starts = vec![0usize; k + 2];
@@ -154,6 +157,19 @@ impl Partition {
             starts,
         }
     }
+}
+
+/// The box of `dims` cut at `cuts` that holds `x` (a cut's own coordinate in the box above it;
+/// a non-finite coordinate where the comparisons put it).
+pub(crate) fn box_of(x: DVec3, dims: [usize; 3], cuts: &[Vec<f64>; 3]) -> u32 {
+    let mut idx = [0usize; 3];
+    for axis in 0..3 {
+        let c = x[axis];
+        idx[axis] = cuts[axis]
+            .partition_point(|&cut| cut <= c)
+            .min(dims[axis] - 1);
+    }
+    (idx[0] + dims[0] * (idx[1] + dims[1] * idx[2])) as u32
 }
 
 /// The orders of the dynamic bodies along each axis (by centre, ties by index) of the last

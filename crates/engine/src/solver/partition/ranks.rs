@@ -13,9 +13,9 @@
 //! is exact in whatever order the ranks add: the cuts are one process's, bit for bit. 13
 //! collectives a step, of 256 values per quantile still open.
 
-use super::Balance;
+use super::{box_of, Balance, STATIC};
 use crate::math::DVec3;
-use crate::solver::exchange::{gather_equal, Exchange};
+use crate::solver::exchange::{gather_equal, gather_varying, Exchange};
 
 /// Bits of a key: the coordinate's 64, then the body's index's 32.
 const KEY_BITS: u32 = 96;
@@ -230,6 +230,38 @@ pub(crate) fn shared_cuts(
     cuts
 }
 
+/// Every body's subdomain under `cuts`, as [`super::Partition::from_cuts`] places them,
+/// found together by the ranks of `ex` (a collective): each rank places the bodies it owns
+/// (`owned`; every body is owned by one rank), reading no other position, and the ranks
+/// share those whose subdomain differs from `previous` (the last partition's, the same on
+/// every rank; [`STATIC`] where there was none).
+pub(crate) fn shared_subdomains(
+    ex: &dyn Exchange,
+    positions: &[DVec3],
+    dynamic: &[bool],
+    dims: [usize; 3],
+    cuts: &[Vec<f64>; 3],
+    owned: impl Fn(usize) -> bool,
+    previous: impl Fn(usize) -> u32,
+) -> Vec<u32> {
+    let n = positions.len();
+    let mut moved = Vec::new();
+    for i in (0..n).filter(|&i| owned(i)) {
+        let s = match dynamic[i] {
+            true => box_of(positions[i], dims, cuts),
+            false => STATIC,
+        };
+        if s != previous(i) {
+            moved.extend([i as f64, f64::from(s)]);
+        }
+    }
+    let mut subdomain: Vec<u32> = (0..n).map(previous).collect();
+    for m in gather_varying(ex, &moved).0.chunks_exact(2) {
+        subdomain[m[0] as usize] = m[1] as u32;
+    }
+    subdomain
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -260,9 +292,11 @@ mod tests {
     }
 
     proptest::proptest! {
-        /// The ranks' cuts are one process's, bit for bit: random centres (some sharing a
-        /// coordinate, some on the same spot, some not finite), random contacts, random
-        /// dynamic bodies, the bodies and contacts dealt at random among 1–4 ranks.
+        /// The ranks' cuts and subdomains are one process's, bit for bit: random centres
+        /// (some sharing a coordinate, some on the same spot, some not finite), random
+        /// contacts, random dynamic bodies, the bodies and contacts dealt at random among 1–4
+        /// ranks, each rank knowing only the centres of the bodies it owns or holds a contact
+        /// of, all starting from a random last partition.
         #[test]
         fn ranks_cut_where_one_process_does(
             seed in 0u64..1_000_000,
@@ -301,6 +335,13 @@ mod tests {
             }
             let owner: Vec<usize> = (0..n).map(|_| (next() * size as f64) as usize).collect();
             let holder: Vec<usize> = pairs.iter().map(|_| (next() * size as f64) as usize).collect();
+            // The last partition's subdomains (any, the same on every rank).
+            let previous: Vec<u32> = (0..n)
+                .map(|_| match next() {
+                    x if x < 0.3 => STATIC,
+                    x => (x * 7.0) as u32,
+                })
+                .collect();
             let balance = if volume { Balance::Volume } else { Balance::Contacts };
             for dims in [[3, 1, 1], [1, 4, 2], [2, 2, 2], [1, 1, 1], [7, 1, 1]] {
                 let one = Partition::build(&positions, &dynamic, dims, balance, &weights);
@@ -310,6 +351,7 @@ mod tests {
                         .map(|ex| {
                             let (positions, dynamic) = (&positions, &dynamic);
                             let (owner, holder, pairs) = (&owner, &holder, &pairs);
+                            let previous = &previous;
                             s.spawn(move || {
                                 let r = ex.rank();
                                 let mut counts = vec![0u32; n];
@@ -320,8 +362,25 @@ mod tests {
                                     counts[a] += 1;
                                     counts[b] += 1;
                                 }
-                                let cuts = shared_cuts(&ex, positions, dynamic, &counts, dims, balance);
-                                Partition::from_cuts(positions, dynamic, dims, &cuts)
+                                // What this rank neither owns nor holds a contact of, it does
+                                // not know.
+                                let mine: Vec<DVec3> = (0..n)
+                                    .map(|i| match owner[i] == r || counts[i] > 0 {
+                                        true => positions[i],
+                                        false => DVec3::new(-7.0, f64::NAN, 1e300),
+                                    })
+                                    .collect();
+                                let cuts = shared_cuts(&ex, &mine, dynamic, &counts, dims, balance);
+                                let subdomain = shared_subdomains(
+                                    &ex,
+                                    &mine,
+                                    dynamic,
+                                    dims,
+                                    &cuts,
+                                    |i| owner[i] == r,
+                                    |i| previous[i],
+                                );
+                                Partition::from_subdomains(dims, subdomain)
                             })
                         })
                         .collect();
