@@ -12,24 +12,21 @@
 //! indicator's grains) is gathered from the bodies' owners in body order
 //! ([`World::gather_body_values`]), so that its sums and hashes run in one process's order.
 //! Between steps a rank need keep only its own dynamic bodies up to date: the others it
-//! reads during a step are sent to it ([`crate::detection::ghosts`]).
+//! reads during a step are sent to it (`detection/ghosts.rs`).
 
 use super::BodyKind;
+use crate::detection::ghosts::owner_of;
 use crate::digest::{body_state, digest_of};
 use crate::solver::exchange::gather_varying;
-use crate::solver::partition::STATIC;
 use crate::world::World;
 
 impl World {
     /// The rank that owns body `i` when the ranks hold their own pairs (see the module).
     pub(crate) fn body_owner(&self, i: usize) -> usize {
-        let Some(owners) = self.detector.owners.as_ref() else {
-            return 0;
-        };
-        match owners.subdomain(i) {
-            STATIC => 0,
-            s => owners.of_subdomain(s as usize),
-        }
+        self.detector
+            .owners
+            .as_ref()
+            .map_or(0, |owners| owner_of(owners, i))
     }
 
     /// Whether what is computed over all bodies is each rank's over its own, combined over

@@ -17,6 +17,7 @@
 use super::ranks::{needs, regions, subdomain_extents};
 use super::{Aabb, Detector};
 use crate::bodies::{BodyKind, BodySet};
+use crate::digest::body_state;
 use crate::math::{DQuat, DVec3};
 use crate::solver::exchange::{gather_varying, PairOwners};
 use crate::solver::partition::STATIC;
@@ -57,9 +58,7 @@ impl Detector {
             })
             .collect();
         // Each owner bounds its subdomains (all their bodies are up to date on it).
-        let own = subdomain_extents(owners, &bound, |i| {
-            owners.of_subdomain(owners.subdomain(i) as usize) == me
-        });
+        let own = subdomain_extents(owners, &bound, mine);
         let mut send = Vec::new();
         for (s, e) in own.iter().enumerate() {
             if owners.of_subdomain(s) == me {
@@ -159,17 +158,9 @@ impl Detector {
     /// Body `i`'s index and values ([`BODY`]) appended to `out`.
     pub(crate) fn put_body(&self, b: &BodySet, i: usize, out: &mut Vec<f64>) {
         let a = &self.anchors;
-        let (p, q, v, w, l) = (
-            b.position[i],
-            b.orientation[i],
-            b.velocity[i],
-            b.angular_velocity[i],
-            b.angular_momentum[i],
-        );
         let (ap, aq, rot) = (a.position[i], a.orientation[i], a.rotation[i]);
         out.push(i as f64);
-        out.extend([p.x, p.y, p.z, q.x, q.y, q.z, q.w]);
-        out.extend([v.x, v.y, v.z, w.x, w.y, w.z, l.x, l.y, l.z]);
+        out.extend(body_state(b, i));
         out.push(self.margins[i]);
         out.extend([ap.x, ap.y, ap.z, aq.x, aq.y, aq.z, aq.w]);
         out.push(f64::from(u8::from(a.moved[i])));
@@ -177,7 +168,8 @@ impl Detector {
         out.push(f64::from(u8::from(a.at_anchor[i])));
     }
 
-    /// Writes the body [`Detector::put_body`] wrote at the start of `x`; returns its index.
+    /// Writes the body [`Detector::put_body`] wrote at the start of `x` (its state in
+    /// [`body_state`]'s order); returns its index.
     pub(crate) fn take_body(&mut self, b: &mut BodySet, x: &[f64]) -> usize {
         let i = x[0] as usize;
         let v3 = |k: usize| DVec3::new(x[k], x[k + 1], x[k + 2]);

@@ -4,7 +4,7 @@
 //! Every process has every body's slot, but a dynamic body is kept up to date only by the
 //! rank that owns it (the owner of its subdomain at the last solve): each step the owners
 //! send the other ranks the bodies those read — ghosts within reach of their regions, and
-//! the bodies a solve moves to them ([`crate::detection::ghosts`]) — and what is computed
+//! the bodies a solve moves to them (`detection/ghosts.rs`) — and what is computed
 //! over all bodies is gathered from their owners. Bodies that are not dynamic (walls,
 //! drives) are stepped alike everywhere. Rank `r` owns the subdomains [`owner`] gives it
 //! (contiguous blocks of subdomains, a rule of the partition alone) and its share of the
