@@ -1,12 +1,12 @@
 //! `mpirun -np K ballast run …` (the `mpi` feature): the run's ranks over MPI (rsmpi on the
-//! system's MPI library). Each rank holds the whole scene; the domain-decomposed solves are
-//! shared (`ballast_engine::solver::exchange`), so the run is bit-identical to one process
-//! with the same partition.
+//! system's MPI library). Each rank keeps its own grains up to date and is sent the others it
+//! reads; the domain-decomposed solves are shared (`ballast_engine::solver::exchange`), so
+//! the run is bit-identical to one process with the same partition.
 
 use ballast_engine::solver::Exchange;
 use ballast_run::{Observer, Ranks};
 use mpi::collective::SystemOperation;
-use mpi::datatype::PartitionMut;
+use mpi::datatype::{Partition, PartitionMut};
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
 use std::sync::Arc;
@@ -63,17 +63,23 @@ impl Exchange for MpiRanks {
     }
 
     fn all_gather(&self, mine: &[f64], counts: &[usize], all: &mut [f64]) {
-        let counts: Vec<i32> = counts.iter().map(|&c| c as i32).collect();
-        let displs: Vec<i32> = counts
-            .iter()
-            .scan(0, |at, &c| {
-                let d = *at;
-                *at += c;
-                Some(d)
-            })
-            .collect();
+        let (counts, displs) = counts_and_displacements(counts);
         let mut part = PartitionMut::new(all, counts, displs);
         self.world.all_gather_varcount_into(mine, &mut part);
+    }
+
+    fn all_to_all(
+        &self,
+        send: &[f64],
+        send_counts: &[usize],
+        recv_counts: &[usize],
+        recv: &mut [f64],
+    ) {
+        let (sc, sd) = counts_and_displacements(send_counts);
+        let (rc, rd) = counts_and_displacements(recv_counts);
+        let send = Partition::new(send, sc, sd);
+        let mut recv = PartitionMut::new(recv, rc, rd);
+        self.world.all_to_all_varcount_into(&send, &mut recv);
     }
 
     fn sum_counts(&self, values: &mut [f64]) {
@@ -81,6 +87,20 @@ impl Exchange for MpiRanks {
         self.world
             .all_reduce_into(&mine[..], values, SystemOperation::sum());
     }
+}
+
+/// MPI's counts and displacements of parts of `counts` values laid one after another.
+fn counts_and_displacements(counts: &[usize]) -> (Vec<i32>, Vec<i32>) {
+    let counts: Vec<i32> = counts.iter().map(|&c| c as i32).collect();
+    let displs = counts
+        .iter()
+        .scan(0, |at, &c| {
+            let d = *at;
+            *at += c;
+            Some(d)
+        })
+        .collect();
+    (counts, displs)
 }
 
 /// The worker threads a rank takes by default: this machine's cores divided among the ranks

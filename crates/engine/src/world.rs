@@ -617,6 +617,12 @@ impl World {
         self.scratch.ddm_workspace.local_problems()
     }
 
+    /// The bodies the domain-decomposed solver numbered in the last step (see
+    /// [`crate::solver::ddm::DdmWorkspace::bodies`]): over K ranks, those this rank's part read.
+    pub fn ddm_bodies(&self) -> usize {
+        self.scratch.ddm_workspace.bodies()
+    }
+
     /// The solver bodies (free velocities after [`World::prepare`]).
     pub fn solver_bodies(&self) -> &[SolverBody] {
         &self.scratch.solver_bodies
@@ -766,13 +772,17 @@ impl World {
         let max_penetration = self.max_over_contacts(0.0, |c, k| -c.gap[k]);
         times.detection = lap.lap();
 
-        // 2. Free velocities.
-        let b = &self.bodies;
+        // 2. Free velocities (on ranks that share the bodies, of those up to date here: no
+        // other is read).
+        let (b, fresh) = (&self.bodies, &self.detector.fresh);
         let (gravity, t0) = (s.gravity, self.time);
         (0..b.len())
             .into_par_iter()
             .with_min_len(256)
-            .map(|i| free_body(b, i, gravity, h, t0, t1))
+            .map(|i| match fresh.get(i) {
+                Some(false) => SolverBody::UNREAD,
+                _ => free_body(b, i, gravity, h, t0, t1),
+            })
             .collect_into_vec(&mut self.scratch.solver_bodies);
         self.drives.clear();
         for i in 0..b.len() {
@@ -921,7 +931,7 @@ impl World {
             }
             Some(d) => {
                 let mut sorted = std::mem::take(&mut self.scratch.sorted_axes);
-                let partition = self.partition_from(d, &mut sorted);
+                let mut partition = self.partition_from(d, &mut sorted);
                 self.scratch.sorted_axes = sorted;
                 self.scratch.ddm_workspace.exchange = self.exchange.clone();
                 let hold = self.detector.hold;
@@ -956,6 +966,8 @@ impl World {
                         .global
                         .iter()
                         .all(|&g| ws.planned_owner(g as usize) == ex.rank()));
+                    // The rank numbers only the bodies its part of the solve reads.
+                    partition = ws.compact(&partition, &self.drives);
                     let local = self.skeleton.local_of();
                     let builder = self.local_builder();
                     ws.fill(&partition, |g| builder.at(local[g] as usize));
@@ -1056,7 +1068,12 @@ impl World {
         times.nlgs += lap.lap();
         let free_w = &self.scratch.free_w;
 
-        // 4. Update, in parallel over bodies (each body's update reads only its own data).
+        // 4. Update, in parallel over bodies (each body's update reads only its own data). On
+        // ranks that hold their own pairs a rank moves only the grains it owns (their owners
+        // under this solve): it was given only their velocities, and the others it reads next
+        // step are sent to it.
+        let (me, owners) = (self.rank(), self.detector.owners.as_ref());
+        let owners = owners.filter(|_| self.detector.hold);
         let b = &mut self.bodies;
         let (kind, inertia) = (&b.kind, &b.inertia);
         let (sbs, pseudo) = (&self.scratch.solver_bodies, &self.scratch.pseudo);
@@ -1071,7 +1088,10 @@ impl World {
             .enumerate()
             .with_min_len(256)
             .for_each(|(i, (x, q, v, w, l))| {
-                if kind[i] == BodyKind::Fixed {
+                let other = |o: &PairOwners| ghosts::owner_of(o, i) != me;
+                if kind[i] == BodyKind::Fixed
+                    || (kind[i] == BodyKind::Dynamic && owners.is_some_and(other))
+                {
                     return;
                 }
                 let (v1, w1) = (sbs[i].v, sbs[i].w);

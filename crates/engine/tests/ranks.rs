@@ -6,7 +6,6 @@
 
 mod common;
 
-use ballast_engine::digest::state_digest;
 use ballast_engine::solver::{Exchange, SolveReport, ThreadRanks};
 use ballast_engine::world::World;
 use std::sync::Arc;
@@ -48,7 +47,7 @@ fn trace(w: &mut World, steps: usize) -> (Trace, f64) {
     let t = Trace {
         solves,
         contacts,
-        digest: state_digest(&w.bodies),
+        digest: w.state_digest(),
         impulses,
     };
     (t, w.timers.communication)
@@ -178,7 +177,8 @@ fn a_rank_places_only_the_bodies_near_its_slabs() {
 
 /// Each rank builds the local problems of the subdomains and interface groups it owns and no
 /// others, and keeps those contacts only: over K ranks they add up to one process's, every
-/// contact's once, and no rank holds them all.
+/// contact's once, and no rank holds them all. Its solve numbers (and copies) only the bodies
+/// its part reads, fewer than one process's.
 #[test]
 fn each_rank_builds_only_its_own_local_problems() {
     let make = || pile([2, 2, 1], true, false);
@@ -189,6 +189,8 @@ fn each_rank_builds_only_its_own_local_problems() {
     }
     let all = alone.ddm_local_problems();
     assert!(all > 20, "{all} local problems: too few to split");
+    let bodies = alone.ddm_bodies();
+    assert_eq!(bodies, alone.bodies.len(), "one process numbers every body");
     assert_eq!(
         all,
         alone.contacts.len(),
@@ -199,9 +201,14 @@ fn each_rank_builds_only_its_own_local_problems() {
             for _ in 0..steps {
                 w.step();
             }
-            (w.ddm_local_problems(), w.contacts.len())
+            (w.ddm_local_problems(), w.contacts.len(), w.ddm_bodies())
         });
-        for (rank, &(mine, contacts)) in held.iter().enumerate() {
+        for (rank, &(mine, contacts, numbered)) in held.iter().enumerate() {
+            // Its own subdomains' bodies, the shared ones and the static ones.
+            assert!(
+                numbered < bodies,
+                "{k} ranks, rank {rank}: {numbered} of {bodies} bodies numbered"
+            );
             assert_eq!(
                 contacts, mine,
                 "{k} ranks, rank {rank}: a rank keeps the contacts it solves, no other"
@@ -213,6 +220,9 @@ fn each_rank_builds_only_its_own_local_problems() {
         }
         let sum: usize = held.iter().map(|h| h.0).sum();
         assert_eq!(sum, all, "{k} ranks: {held:?}");
+        // Every body is some rank's; the shared and static ones are every rank's.
+        let numbered: usize = held.iter().map(|h| h.2).sum();
+        assert!(numbered > bodies, "{k} ranks: {held:?} of {bodies} bodies");
     }
 }
 

@@ -144,7 +144,7 @@ fn frames_in_pieces_hold_one_process_frame() {
                     writer.write_frame(w).unwrap();
                 }
             }
-            state_digest(&w.bodies)
+            w.state_digest()
         });
         for d in digests {
             assert_eq!(d, state_digest(&alone.bodies), "{k} ranks");
@@ -239,7 +239,7 @@ fn checkpoint_in_parts_resumes_on_any_number_of_ranks() {
         steps(w, 1500);
         write_checkpoint_on_ranks(w, None, &m).unwrap();
         steps(w, 1550);
-        state_digest(&w.bodies)
+        w.state_digest()
     });
     for d in &written {
         assert_eq!(*d, expected, "2 ranks");
@@ -274,7 +274,7 @@ fn checkpoint_in_parts_resumes_on_any_number_of_ranks() {
     for d in on_ranks(3, move |_, w| {
         read_checkpoint(&m, w).unwrap();
         steps(w, 1550);
-        state_digest(&w.bodies)
+        w.state_digest()
     }) {
         assert_eq!(d, expected, "resumed by 3 ranks");
     }

@@ -3,7 +3,6 @@
 //! over the engine's and the railway crate's library API, like the CLI: scenarios in, steps
 //! (with the GIL released), arrays, contact problems and summaries out.
 
-use ballast_engine::digest::state_digest;
 use ballast_engine::laws::ContactStatus;
 use ballast_engine::math::DVec3;
 use ballast_engine::output::checkpoint::{read_checkpoint_with_stats, write_checkpoint_with_stats};
@@ -345,7 +344,7 @@ impl Simulation {
 
     /// Hash of every body's position, orientation and velocities (as in `summary.json`).
     fn state_digest(&self) -> String {
-        state_digest(&self.world().bodies)
+        self.world().state_digest()
     }
 
     /// The keys of `summary.json`, as JSON text.

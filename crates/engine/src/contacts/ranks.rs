@@ -224,24 +224,29 @@ impl ContactSet {
         let holder: Vec<usize> = (0..self.len())
             .map(|k| owners.of(self.body1[k], self.body2[k]))
             .collect();
-        let send_count = holder.iter().filter(|&&h| h != me).count();
-        let mut send = Vec::with_capacity(send_count * (VALUES + 1));
+        let mut send_count = vec![0; ex.size()];
+        for &h in holder.iter().filter(|&&h| h != me) {
+            send_count[h] += 1;
+        }
+        let mut send: Vec<Vec<f64>> = send_count
+            .iter()
+            .map(|&c| Vec::with_capacity(c * VALUES))
+            .collect();
         for (k, &h) in holder.iter().enumerate() {
             if h != me {
-                send.push(h as f64);
-                put(self, k, &mut send);
+                put(self, k, &mut send[h]);
             }
         }
+        let send_count: usize = send_count.iter().sum();
         let t = std::time::Instant::now();
-        let (all, _) = exchange::gather_varying(ex, &send);
+        let (all, _) = exchange::exchange_parts(ex, &send);
+        drop(send);
         let seconds = t.elapsed().as_secs_f64();
-        let mine = |x: &&[f64]| x[0] as usize == me;
-        let mut arrived =
-            ContactSet::with_capacity(all.chunks_exact(VALUES + 1).filter(mine).count());
-        for x in all.chunks_exact(VALUES + 1).filter(mine) {
-            take(&x[1..], &mut arrived);
+        let mut arrived = ContactSet::with_capacity(all.len() / VALUES);
+        for x in all.chunks_exact(VALUES) {
+            take(x, &mut arrived);
         }
-        if send.is_empty() && arrived.is_empty() {
+        if send_count == 0 && arrived.is_empty() {
             return seconds;
         }
         // From several ranks, each in pair order; no pair on two ranks: sorted by pair, each

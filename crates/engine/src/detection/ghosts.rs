@@ -19,7 +19,7 @@ use super::{Aabb, Detector};
 use crate::bodies::{BodyKind, BodySet};
 use crate::digest::body_state;
 use crate::math::{DQuat, DVec3};
-use crate::solver::exchange::{gather_varying, PairOwners};
+use crate::solver::exchange::{exchange_parts, gather_varying, PairOwners};
 use crate::solver::partition::STATIC;
 use crate::solver::Exchange;
 use std::time::Instant;
@@ -81,28 +81,25 @@ impl Detector {
             .filter(|&r| r != me)
             .map(|r| (r, regions(owners, r, &extents)))
             .collect();
-        let mut send = Vec::new();
+        let mut send = vec![Vec::new(); ex.size()];
         for i in (0..n).filter(|&i| bodies.kind[i] == BodyKind::Dynamic && mine(i)) {
             for (r, regions) in &others {
                 if regions
                     .as_ref()
                     .is_none_or(|g| needs(owners, g, i, &bound[i]))
                 {
-                    send.push(*r as f64);
-                    self.put_body(bodies, i, &mut send);
+                    self.put_body(bodies, i, &mut send[*r]);
                 }
             }
         }
-        let (all, _) = gather_varying(ex, &send);
+        let (all, _) = exchange_parts(ex, &send);
         let seconds = clock.elapsed().as_secs_f64();
         let mut fresh: Vec<bool> = (0..n)
             .map(|i| bodies.kind[i] != BodyKind::Dynamic || mine(i))
             .collect();
-        for x in all.chunks_exact(1 + BODY) {
-            if x[0] as usize == me {
-                let i = self.take_body(bodies, &x[1..]);
-                fresh[i] = true;
-            }
+        for x in all.chunks_exact(BODY) {
+            let i = self.take_body(bodies, x);
+            fresh[i] = true;
         }
         self.fresh = fresh;
         self.extents = extents;
@@ -124,32 +121,31 @@ impl Detector {
         }
         let owners = self.owners.as_ref().expect("ranks that hold their pairs");
         let me = ex.rank();
-        let asked: Vec<f64> = (0..bodies.len())
+        // Each request goes to the body's owner, each reply back to the rank that asked.
+        let mut asked = vec![Vec::new(); ex.size()];
+        for i in (0..bodies.len())
             .filter(|&i| bodies.kind[i] == BodyKind::Dynamic && !self.fresh[i] && needed(i))
-            .map(|i| i as f64)
-            .collect();
+        {
+            asked[owner_of(owners, i)].push(i as f64);
+        }
         let clock = Instant::now();
-        let (all, counts) = gather_varying(ex, &asked);
-        let mut send = Vec::new();
+        let (all, counts) = exchange_parts(ex, &asked);
+        let mut send = vec![Vec::new(); ex.size()];
         let mut at = 0;
         for (r, &count) in counts.iter().enumerate() {
             for &i in &all[at..at + count] {
-                if owner_of(owners, i as usize) == me {
-                    send.push(r as f64);
-                    self.put_body(bodies, i as usize, &mut send);
-                }
+                debug_assert_eq!(owner_of(owners, i as usize), me);
+                self.put_body(bodies, i as usize, &mut send[r]);
             }
             at += count;
         }
-        let (all, _) = gather_varying(ex, &send);
+        let (all, _) = exchange_parts(ex, &send);
         let seconds = clock.elapsed().as_secs_f64();
         let mut got = Vec::new();
-        for x in all.chunks_exact(1 + BODY) {
-            if x[0] as usize == me {
-                let i = self.take_body(bodies, &x[1..]);
-                self.fresh[i] = true;
-                got.push(i);
-            }
+        for x in all.chunks_exact(BODY) {
+            let i = self.take_body(bodies, x);
+            self.fresh[i] = true;
+            got.push(i);
         }
         got.sort_unstable();
         (got, seconds)

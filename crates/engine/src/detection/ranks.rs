@@ -179,27 +179,23 @@ impl Detector {
             .par_iter()
             .map(|&(i, j)| owners.of(i, j))
             .collect();
-        let mut send = Vec::new();
+        let mut send = vec![Vec::new(); ex.size()];
         for (l, &h) in holder.iter().enumerate() {
             if h != me {
-                send.push(h as f64);
-                put(&self.results.get(l), &mut send);
+                put(&self.results.get(l), &mut send[h]);
             }
         }
         let t = Instant::now();
-        let (all, _) = exchange::gather_varying(ex, &send);
+        let (all, _) = exchange::exchange_parts(ex, &send);
         let seconds = t.elapsed().as_secs_f64();
         let mut arrived: Vec<PairGeometry> = Vec::new();
         let mut at = 0;
         while at < all.len() {
-            let to = all[at] as usize;
-            let (g, used) = take(&all[at + 1..]);
-            if to == me {
-                arrived.push(g);
-            }
-            at += 1 + used;
+            let (g, used) = take(&all[at..]);
+            arrived.push(g);
+            at += used;
         }
-        if send.is_empty() && arrived.is_empty() {
+        if send.iter().all(Vec::is_empty) && arrived.is_empty() {
             return seconds;
         }
         let key = |g: &PairGeometry| (g.body1.min(g.body2), g.body1.max(g.body2));

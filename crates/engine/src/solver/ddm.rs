@@ -28,7 +28,7 @@ use super::delassus::{BodyAccess, LocalBuilder, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
 use super::exchange::{self, Exchange, ShareBuffers, Unit};
 use super::nlgs::{Nlgs, SolveReport, SweepSums, TermCache};
-use super::partition::{Balance, Partition, STATIC};
+use super::partition::{Balance, Partition, LEFT_OUT, STATIC};
 use super::StopRule;
 use crate::laws::{ContactStatus, Elastic};
 use crate::math::DVec3;
@@ -896,8 +896,14 @@ struct Ranks<'a> {
     sub_boundary: Vec<Vec<u32>>,
     /// Per interface group: the bodies its contacts write.
     group_bodies: Vec<Vec<u32>>,
+    /// Per subdomain, then per group: which ranks read the bodies it shares (see
+    /// [`Ranks::readers`]).
+    sub_readers: Vec<Vec<bool>>,
+    group_readers: Vec<Vec<bool>>,
     /// The dynamic bodies in solver numbering: subdomain `s`'s are `starts[s]..starts[s + 1]`.
     all_bodies: Vec<u32>,
+    /// Whether a solve ends with every body on every rank ([`Ranks::share_solved`]).
+    whole_at_end: bool,
     starts: &'a [usize],
     buf: ShareBuffers,
     values: Vec<f64>,
@@ -906,11 +912,17 @@ struct Ranks<'a> {
 }
 
 impl<'a> Ranks<'a> {
-    fn new(ex: &'a dyn Exchange, p: &DdmProblem, starts: &'a [usize], dr: &[DriveRows]) -> Self {
+    fn new(
+        ex: &'a dyn Exchange,
+        p: &DdmProblem,
+        starts: &'a [usize],
+        dr: &[DriveRows],
+        whole_at_end: bool,
+    ) -> Self {
         let (k, size) = (p.sub.len(), ex.size());
         let sub_owner: Vec<usize> = (0..k).map(|s| exchange::owner(s, k, size)).collect();
         let dynamic = starts[k] as u32;
-        let group_owner = p.groups.iter().map(|g| g.owner).collect();
+        let group_owner: Vec<usize> = p.groups.iter().map(|g| g.owner).collect();
         let mut read = vec![false; dynamic as usize];
         // Listed by the rebuild for every group, remote or not (a remote group has no local
         // problems to read them from).
@@ -918,30 +930,101 @@ impl<'a> Ranks<'a> {
         for &i in group_bodies.iter().flatten() {
             read[i as usize] = true;
         }
+        let mut driven = vec![false; dynamic as usize];
         for d in dr {
             if d.body < dynamic {
                 read[d.body as usize] = true;
+                driven[d.body as usize] = true;
             }
         }
-        let sub_boundary = (0..k)
+        let sub_boundary: Vec<Vec<u32>> = (0..k)
             .map(|s| {
                 (starts[s] as u32..starts[s + 1] as u32)
                     .filter(|&i| read[i as usize])
                     .collect()
             })
             .collect();
+        let (sub_readers, group_readers) = Self::readers(
+            p,
+            &sub_owner,
+            &group_owner,
+            size,
+            |bodies| bodies.iter().any(|&b| driven[b as usize]),
+            &sub_boundary,
+            &group_bodies,
+        );
         Ranks {
             ex,
             sub_owner,
             group_owner,
             sub_boundary,
             group_bodies,
+            sub_readers,
+            group_readers,
             all_bodies: (0..dynamic).collect(),
+            whole_at_end,
             starts,
             buf: ShareBuffers::default(),
             values: Vec::new(),
             seconds: 0.0,
         }
+    }
+
+    /// Which ranks read the bodies each subdomain and each interface group shares after its
+    /// phase (empty: every rank). A subdomain's boundary is read by the ranks of the groups
+    /// that join it; a group's bodies by the ranks of its two subdomains and of the groups
+    /// that join either (they may share bodies with it). A body that a drive moves is read
+    /// by every rank (each sweeps the drives), and so is every body of the interface solved
+    /// in one group. Groups of a colour join disjoint subdomains, so no other rank reads
+    /// what a phase writes before the next share.
+    fn readers(
+        p: &DdmProblem,
+        sub_owner: &[usize],
+        group_owner: &[usize],
+        size: usize,
+        driven: impl Fn(&[u32]) -> bool,
+        sub_boundary: &[Vec<u32>],
+        group_bodies: &[Vec<u32>],
+    ) -> (Vec<Vec<bool>>, Vec<Vec<bool>>) {
+        let k = sub_owner.len();
+        let sequential = p.groups.iter().any(|g| g.pair.0 == STATIC);
+        // The groups that join each subdomain.
+        let mut joins: Vec<Vec<usize>> = vec![Vec::new(); k];
+        for (g, grp) in p.groups.iter().enumerate().filter(|_| !sequential) {
+            joins[grp.pair.0 as usize].push(g);
+            joins[grp.pair.1 as usize].push(g);
+        }
+        let subs = (0..k)
+            .map(|s| {
+                if sequential || driven(&sub_boundary[s]) {
+                    return Vec::new();
+                }
+                let mut r = vec![false; size];
+                for &g in &joins[s] {
+                    r[group_owner[g]] = true;
+                }
+                r
+            })
+            .collect();
+        let groups = p
+            .groups
+            .iter()
+            .enumerate()
+            .map(|(g, grp)| {
+                if sequential || driven(&group_bodies[g]) {
+                    return Vec::new();
+                }
+                let mut r = vec![false; size];
+                for s in [grp.pair.0 as usize, grp.pair.1 as usize] {
+                    r[sub_owner[s]] = true;
+                    for &other in &joins[s] {
+                        r[group_owner[other]] = true;
+                    }
+                }
+                r
+            })
+            .collect();
+        (subs, groups)
     }
 
     /// Whether this rank sweeps each subdomain, and each interface group.
@@ -981,21 +1064,39 @@ impl<'a> Ranks<'a> {
     fn share_subdomains<T: Wire>(&mut self, pb: &mut [SolverBody], results: &mut [T], whole: bool) {
         let all = std::mem::take(&mut self.all_bodies);
         let boundary = std::mem::take(&mut self.sub_boundary);
+        let readers = std::mem::take(&mut self.sub_readers);
         let units: Vec<Unit> = (0..self.sub_owner.len())
-            .map(|s| Unit {
-                owner: self.sub_owner[s],
-                bodies: if whole {
-                    &all[self.starts[s]..self.starts[s + 1]]
-                } else {
-                    &boundary[s]
+            .map(|s| match whole {
+                true => Unit {
+                    owner: self.sub_owner[s],
+                    bodies: &all[self.starts[s]..self.starts[s + 1]],
+                    values: T::LEN,
+                    readers: &[],
                 },
-                values: T::LEN,
+                false => Unit {
+                    owner: self.sub_owner[s],
+                    bodies: &boundary[s],
+                    values: T::LEN,
+                    readers: &readers[s],
+                },
             })
             .collect();
         self.share(&units, pb, results);
         drop(units);
         self.all_bodies = all;
         self.sub_boundary = boundary;
+        self.sub_readers = readers;
+    }
+
+    /// At the end of a solve (or of the correction's sweeps): every subdomain's bodies from its
+    /// owner to every rank, when the ranks keep every body. Ranks that hold their own contacts
+    /// do not: a dynamic body is then kept up to date by its owner alone, and sent to the
+    /// ranks that read it when they do (`detection/ghosts.rs`); the bodies of Γ and of the
+    /// drives are shared as the sweeps go, so they are the same on every rank already.
+    fn share_solved(&mut self, pb: &mut [SolverBody]) {
+        if self.whole_at_end {
+            self.share_subdomains(pb, &mut vec![(); self.sub_owner.len()], true);
+        }
     }
 
     /// After one colour of interface groups (`range`): their bodies and reports.
@@ -1006,16 +1107,19 @@ impl<'a> Ranks<'a> {
         results: &mut [T],
     ) {
         let bodies = std::mem::take(&mut self.group_bodies);
+        let readers = std::mem::take(&mut self.group_readers);
         let units: Vec<Unit> = range
             .map(|g| Unit {
                 owner: self.group_owner[g],
                 bodies: &bodies[g],
                 values: T::LEN,
+                readers: &readers[g],
             })
             .collect();
         self.share(&units, pb, results);
         drop(units);
         self.group_bodies = bodies;
+        self.group_readers = readers;
     }
 
     /// Every bucket's report (subdomains, then groups), no bodies.
@@ -1028,6 +1132,7 @@ impl<'a> Ranks<'a> {
                 owner,
                 bodies: &[],
                 values: T::LEN,
+                readers: &[],
             })
             .collect();
         self.share(&units, &mut [], results);
@@ -1046,6 +1151,7 @@ impl<'a> Ranks<'a> {
                 owner,
                 bodies: &[],
                 values: b.len(),
+                readers: &[],
             })
             .collect();
         exchange::share(self.ex, &units, &mut [], terms, &mut self.buf);
@@ -1169,6 +1275,13 @@ impl DdmWorkspace {
         self.problem.buckets().map(|b| b.locals.len()).sum()
     }
 
+    /// The bodies the last solve numbered: every body in one process; on K ranks, those of
+    /// this rank's subdomains, those the ranks share and the static ones
+    /// (a rank numbers only the bodies its part reads).
+    pub fn bodies(&self) -> usize {
+        self.pb.len()
+    }
+
     /// Which rank holds each body pair after the last solve (or plan) over `partition`, on
     /// `size` ranks (see [`exchange::PairOwners`]; `attach` as there).
     pub(crate) fn pair_owners(
@@ -1205,6 +1318,38 @@ impl DdmWorkspace {
     pub(crate) fn planned_owner(&self, k: usize) -> usize {
         let size = self.exchange.as_ref().map_or(1, |e| e.size());
         self.problem.planned_owner(k, size)
+    }
+
+    /// This rank's numbering of the solve of the last [`DdmWorkspace::plan`] over `partition`
+    /// (on ranks; [`Partition::compact`]): the bodies of the subdomains it sweeps, those that
+    /// any interface group's contacts join or a drive (of `drives`, bodies in the caller's
+    /// numbering) moves — the bodies every rank shares after a phase — and the static ones.
+    /// The interface groups' bodies are renumbered; [`DdmWorkspace::fill`] and
+    /// [`solve_contacts`] take the partition returned. The bodies it leaves out are those of
+    /// the other ranks' subdomains that no rank shares: nothing here reads or writes them.
+    pub(crate) fn compact(&mut self, partition: &Partition, drives: &[DriveRows]) -> Partition {
+        let ex = self
+            .exchange
+            .as_ref()
+            .expect("a solve shared between ranks");
+        let (me, size, k) = (ex.rank(), ex.size(), partition.count());
+        let starts = &partition.starts;
+        let mut keep = vec![false; partition.order.len()];
+        for s in (0..k).filter(|&s| exchange::owner(s, k, size) == me) {
+            keep[starts[s]..starts[s + 1]].fill(true);
+        }
+        keep[starts[k]..].fill(true);
+        for &b in self.problem.groups.iter().flat_map(|g| &g.bodies) {
+            keep[b as usize] = true;
+        }
+        for d in drives {
+            keep[partition.new_index[d.body as usize] as usize] = true;
+        }
+        let (compact, local) = partition.compact(&keep);
+        for b in self.problem.groups.iter_mut().flat_map(|g| &mut g.bodies) {
+            *b = local[*b as usize];
+        }
+        compact
     }
 
     /// Builds the local problems of this rank's buckets of the last [`DdmWorkspace::plan`],
@@ -1290,10 +1435,11 @@ pub(crate) fn solve_contacts(
     }));
     // Distributed over ranks: each builds and sweeps its own buckets only, and shares what
     // the others read next.
+    let whole_at_end = !matches!(contacts, Contacts::Held { .. });
     let mut ranks = ex
         .as_deref()
         .filter(|e| e.size() > 1)
-        .map(|e| Ranks::new(e, p, starts, dr));
+        .map(|e| Ranks::new(e, p, starts, dr, whole_at_end));
 
     // 1. Residual scale (terms in parallel, summed in the equivalent order), then warm start.
     let buckets: Vec<&Bucket> = p.buckets().collect();
@@ -1440,17 +1586,18 @@ pub(crate) fn solve_contacts(
         d.impulse_v = w.impulse_v;
         d.impulse_w = w.impulse_w;
     }
-    // Every rank gets every body: the bodies stay the same on every rank.
     if let Some(r) = ranks.as_mut() {
-        r.share_subdomains(pb, &mut vec![(); p.sub.len()], true);
+        r.share_solved(pb);
     }
 
     // 3. Back to the caller's numbering, in parallel over the caller's bodies and contacts.
+    // (A rank's own numbering leaves out bodies it does not read: theirs are left as they are.)
     let (new_index, pb_ref) = (&partition.new_index, pb.as_slice());
     bodies
         .par_iter_mut()
         .with_min_len(1024)
         .zip(new_index.par_iter())
+        .filter(|(_, &k)| k != LEFT_OUT)
         .for_each(|(b, &k)| *b = pb_ref[k as usize]);
     let buckets: Vec<&Bucket> = p.buckets().collect();
     let solved = |(st, &(bi, k)): (&mut ContactStatus, &(u32, u32))| {
@@ -1567,7 +1714,7 @@ fn correct(
             );
         }
         if let Some(r) = ranks {
-            r.share_subdomains(pv, &mut vec![(); p.sub.len()], true);
+            r.share_solved(pv);
         }
     }
     let pv = pv.as_slice();
@@ -1577,7 +1724,10 @@ fn correct(
             .new_index
             .par_iter()
             .with_min_len(1024)
-            .map(|&k| pv[k as usize]),
+            .map(|&k| match k {
+                LEFT_OUT => SolverBody::UNREAD,
+                k => pv[k as usize],
+            }),
     );
     found
 }

@@ -31,6 +31,20 @@ pub struct SolverBody {
     pub version: u32,
 }
 
+impl SolverBody {
+    /// A placeholder at rest with no mass: the solver body of a body that a rank sharing a
+    /// solve neither owns nor reads this step, which nothing reads.
+    pub const UNREAD: SolverBody = SolverBody {
+        v: DVec3::ZERO,
+        w: DVec3::ZERO,
+        inv_mass: 0.0,
+        inv_inertia: DMat3::ZERO,
+        epoch: 0,
+        drift: 0.0,
+        version: 0,
+    };
+}
+
 /// One contact's local problem.
 #[derive(Clone, Copy, Debug)]
 pub struct LocalProblem {

@@ -15,15 +15,14 @@
 //! with their manifold and contacts. After each phase of the solve the ranks share what the
 //! phase wrote that another rank reads next: the velocities of the bodies the interface
 //! contacts and the drives touch, each bucket's sums for the stop test, and once a step each
-//! contact's share of the residual's scale. At the end of the solve every rank receives
-//! every body's velocities (the share still to be narrowed to the owners and the ghosts
-//! they send). Sharing copies
+//! contact's share of the residual's scale. At the end of the solve a grain's velocity stays
+//! on its owner, which alone integrates it. Sharing copies
 //! values: each bucket is swept with the same arithmetic in the same order as in one
 //! process, so a run over K ranks is bit-identical to a shared-memory run with the same
 //! partition.
 //!
-//! The engine needs no MPI library: [`Exchange`] is the one collective it calls (an
-//! all-gather of `f64`s); the command line implements it over MPI (the `mpi` feature), and
+//! The engine needs no MPI library: [`Exchange`] has the collectives it calls (an
+//! all-gather of `f64`s, and an all-to-all for what goes to some ranks only); the command line implements it over MPI (the `mpi` feature), and
 //! [`ThreadRanks`] in-process, for tests.
 
 use super::delassus::SolverBody;
@@ -41,6 +40,18 @@ pub trait Exchange: Send + Sync + std::fmt::Debug {
     /// All-gather: each rank gives `mine` (`counts[rank]` values); `all` (`Σ counts` values)
     /// receives every rank's values, rank after rank.
     fn all_gather(&self, mine: &[f64], counts: &[usize], all: &mut [f64]);
+
+    /// Personalised all-to-all: `send` holds `send_counts[r]` values for each rank `r`, rank
+    /// after rank (this rank's own part included); `recv` (`Σ recv_counts` values) receives
+    /// what each rank sent this one, rank after rank, `recv_counts[r]` from rank `r` (each
+    /// rank's count for this one, which the ranks exchange first).
+    fn all_to_all(
+        &self,
+        send: &[f64],
+        send_counts: &[usize],
+        recv_counts: &[usize],
+        recv: &mut [f64],
+    );
 
     /// All-reduce by sum: `values` (the same length on every rank) becomes, element by
     /// element, the sum over the ranks. Only for counts (whole numbers below 2⁵³), whose sums
@@ -75,6 +86,23 @@ pub(crate) fn gather_varying(ex: &dyn Exchange, mine: &[f64]) -> (Vec<f64>, Vec<
     let mut all = vec![0.0; counts.iter().sum()];
     ex.all_gather(mine, &counts, &mut all);
     (all, counts)
+}
+
+/// Sends `parts[r]` to rank `r` (this rank's own part included), point to point: what every
+/// rank sent this one, rank after rank, and how many values came from each (two collectives:
+/// the counts, then the values). Each rank receives only what is meant for it, where
+/// [`gather_varying`] would give every rank every rank's messages.
+pub(crate) fn exchange_parts(ex: &dyn Exchange, parts: &[Vec<f64>]) -> (Vec<f64>, Vec<usize>) {
+    let size = ex.size();
+    debug_assert_eq!(parts.len(), size);
+    let send_counts: Vec<usize> = parts.iter().map(Vec::len).collect();
+    let counts: Vec<f64> = send_counts.iter().map(|&c| c as f64).collect();
+    let mut recv_counts = vec![0.0; size];
+    ex.all_to_all(&counts, &vec![1; size], &vec![1; size], &mut recv_counts);
+    let recv_counts: Vec<usize> = recv_counts.iter().map(|&c| c as usize).collect();
+    let mut recv = vec![0.0; recv_counts.iter().sum()];
+    ex.all_to_all(&parts.concat(), &send_counts, &recv_counts, &mut recv);
+    (recv, recv_counts)
 }
 
 /// The rank that owns subdomain `s` of `n` over `size` ranks: contiguous blocks of
@@ -221,11 +249,27 @@ pub(crate) fn take_body(b: &mut SolverBody, x: &[f64]) {
 }
 
 /// What one phase of a distributed solve shares from one bucket: the rank that swept it, the
-/// bodies it wrote that others read (solver numbering), and how many values it reports.
+/// bodies it wrote that others read (solver numbering), how many values it reports, and which
+/// ranks read those bodies.
 pub(crate) struct Unit<'a> {
     pub owner: usize,
     pub bodies: &'a [u32],
     pub values: usize,
+    /// `readers[r]`: whether rank `r` reads the bodies (empty: every rank does). Every rank
+    /// receives the values.
+    pub readers: &'a [bool],
+}
+
+impl Unit<'_> {
+    /// Whether rank `r` receives the unit's bodies.
+    fn read_by(&self, r: usize) -> bool {
+        self.readers.is_empty() || self.readers[r]
+    }
+
+    /// The number of values rank `r` receives of the unit (`r` is not its owner).
+    fn sent_to(&self, r: usize) -> usize {
+        self.values + usize::from(self.read_by(r)) * self.bodies.len() * BODY_VALUES
+    }
 }
 
 /// Buffers of [`share`], kept from one call to the next.
@@ -233,13 +277,16 @@ pub(crate) struct Unit<'a> {
 pub(crate) struct ShareBuffers {
     send: Vec<f64>,
     all: Vec<f64>,
+    send_counts: Vec<usize>,
     counts: Vec<usize>,
     cursor: Vec<usize>,
 }
 
-/// Shares `units`: each rank sends the bodies and values of the units it owns (`values` holds
-/// every unit's values, unit after unit) and receives everyone else's, so that afterwards
-/// `bodies` and `values` hold, on every rank, what each unit's owner computed.
+/// Shares `units`: each rank sends the values of the units it owns (`values` holds every
+/// unit's values, unit after unit) to every other rank, and their bodies to the ranks that
+/// read them, point to point; afterwards `values` holds, on every rank, what each unit's
+/// owner computed, and `bodies` the bodies each rank reads. Every rank knows every unit, so
+/// each knows what it receives from whom without asking: one all-to-all.
 pub(crate) fn share(
     ex: &dyn Exchange,
     units: &[Unit],
@@ -248,23 +295,38 @@ pub(crate) fn share(
     buf: &mut ShareBuffers,
 ) {
     let (me, size) = (ex.rank(), ex.size());
+    buf.send_counts.clear();
+    buf.send_counts.resize(size, 0);
     buf.counts.clear();
     buf.counts.resize(size, 0);
-    buf.send.clear();
-    let mut off = 0;
     for u in units {
-        buf.counts[u.owner] += u.bodies.len() * BODY_VALUES + u.values;
         if u.owner == me {
-            for &b in u.bodies {
-                put_body(&bodies[b as usize], &mut buf.send);
+            for r in (0..size).filter(|&r| r != me) {
+                buf.send_counts[r] += u.sent_to(r);
             }
-            buf.send.extend_from_slice(&values[off..off + u.values]);
+        } else {
+            buf.counts[u.owner] += u.sent_to(me);
         }
-        off += u.values;
+    }
+    // Rank after rank, each rank's part in unit order.
+    buf.send.clear();
+    for r in (0..size).filter(|&r| r != me) {
+        let mut off = 0;
+        for u in units {
+            if u.owner == me {
+                if u.read_by(r) {
+                    for &b in u.bodies {
+                        put_body(&bodies[b as usize], &mut buf.send);
+                    }
+                }
+                buf.send.extend_from_slice(&values[off..off + u.values]);
+            }
+            off += u.values;
+        }
     }
     buf.all.clear();
     buf.all.resize(buf.counts.iter().sum(), 0.0);
-    ex.all_gather(&buf.send, &buf.counts, &mut buf.all);
+    ex.all_to_all(&buf.send, &buf.send_counts, &buf.counts, &mut buf.all);
     // Where each rank's part starts, then read in unit order.
     buf.cursor.clear();
     let mut at = 0;
@@ -274,13 +336,13 @@ pub(crate) fn share(
     }
     let mut off = 0;
     for u in units {
-        let c = &mut buf.cursor[u.owner];
-        if u.owner == me {
-            *c += u.bodies.len() * BODY_VALUES + u.values;
-        } else {
-            for &b in u.bodies {
-                take_body(&mut bodies[b as usize], &buf.all[*c..*c + BODY_VALUES]);
-                *c += BODY_VALUES;
+        if u.owner != me {
+            let c = &mut buf.cursor[u.owner];
+            if u.read_by(me) {
+                for &b in u.bodies {
+                    take_body(&mut bodies[b as usize], &buf.all[*c..*c + BODY_VALUES]);
+                    *c += BODY_VALUES;
+                }
             }
             values[off..off + u.values].copy_from_slice(&buf.all[*c..*c + u.values]);
             *c += u.values;
@@ -303,6 +365,8 @@ pub struct ThreadRanks {
 struct ThreadShared {
     barrier: Barrier,
     parts: Mutex<Vec<Vec<f64>>>,
+    /// The all-to-all's messages: from rank `a` to rank `b` at `a · size + b`.
+    mail: Mutex<Vec<Vec<f64>>>,
 }
 
 impl ThreadRanks {
@@ -311,6 +375,7 @@ impl ThreadRanks {
         let shared = Arc::new(ThreadShared {
             barrier: Barrier::new(k),
             parts: Mutex::new(vec![Vec::new(); k]),
+            mail: Mutex::new(vec![Vec::new(); k * k]),
         });
         (0..k)
             .map(|rank| ThreadRanks {
@@ -348,6 +413,37 @@ impl Exchange for ThreadRanks {
             }
         }
         // Nobody writes its next part before everyone has read this one.
+        self.shared.barrier.wait();
+    }
+
+    fn all_to_all(
+        &self,
+        send: &[f64],
+        send_counts: &[usize],
+        recv_counts: &[usize],
+        recv: &mut [f64],
+    ) {
+        let (me, size) = (self.rank, self.size);
+        {
+            let mut mail = self.shared.mail.lock().expect("a rank thread panicked");
+            let mut at = 0;
+            for (r, &c) in send_counts.iter().enumerate() {
+                mail[me * size + r].clear();
+                mail[me * size + r].extend_from_slice(&send[at..at + c]);
+                at += c;
+            }
+        }
+        self.shared.barrier.wait();
+        {
+            let mail = self.shared.mail.lock().expect("a rank thread panicked");
+            let mut at = 0;
+            for (r, &c) in recv_counts.iter().enumerate() {
+                let part = &mail[r * size + me];
+                debug_assert_eq!(part.len(), c);
+                recv[at..at + c].copy_from_slice(part);
+                at += c;
+            }
+        }
         self.shared.barrier.wait();
     }
 }
@@ -401,6 +497,39 @@ mod tests {
             (c.epoch, c.drift.to_bits(), c.version),
             (b.epoch, b.drift.to_bits(), b.version)
         );
+    }
+
+    /// Three in-process ranks send each other parts of different lengths (some empty, one to
+    /// itself): each receives exactly the parts meant for it, in rank order — what it would
+    /// keep of an all-gather of every rank's messages.
+    #[test]
+    fn thread_ranks_exchange_parts_point_to_point() {
+        let part = |from: usize, to: usize| -> Vec<f64> {
+            (0..(from + 2 * to) % 4)
+                .map(|i| (100 * from + 10 * to + i) as f64)
+                .collect()
+        };
+        let handles: Vec<_> = ThreadRanks::group(3)
+            .into_iter()
+            .map(|r| {
+                std::thread::spawn(move || {
+                    let parts: Vec<Vec<f64>> = (0..3).map(|to| part(r.rank(), to)).collect();
+                    let mut got = Vec::new();
+                    for _ in 0..3 {
+                        got.push(exchange_parts(&r, &parts));
+                    }
+                    (r.rank(), got)
+                })
+            })
+            .collect();
+        for h in handles {
+            let (me, got) = h.join().unwrap();
+            let expect: Vec<f64> = (0..3).flat_map(|from| part(from, me)).collect();
+            let counts: Vec<usize> = (0..3).map(|from| part(from, me).len()).collect();
+            for g in got {
+                assert_eq!(g, (expect.clone(), counts.clone()), "rank {me}");
+            }
+        }
     }
 
     /// Three in-process ranks gather parts of different lengths in rank order.

@@ -26,6 +26,9 @@ pub(crate) use ranks::{shared_cuts, shared_subdomains};
 /// Marks a body that belongs to no subdomain (kinematic or fixed).
 pub const STATIC: u32 = u32::MAX;
 
+/// The solver index of a body that a rank's own numbering of a solve leaves out.
+pub const LEFT_OUT: u32 = u32::MAX;
+
 /// How box boundaries are chosen.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -156,6 +159,41 @@ impl Partition {
             order,
             starts,
         }
+    }
+}
+
+impl Partition {
+    /// This partition's solver numbering restricted to the solver indices `keep` marks, in the
+    /// same order: each subdomain's kept bodies still contiguous, the static ones last. A rank
+    /// that solves part of a step numbers by it only the bodies its part reads, so that its
+    /// copies of the solver's per-body arrays shrink with the number of ranks. Returns it and
+    /// the new index of each old one ([`LEFT_OUT`] for those left out, whose `new_index` is
+    /// [`LEFT_OUT`] too).
+    pub(crate) fn compact(&self, keep: &[bool]) -> (Partition, Vec<u32>) {
+        let mut local = vec![LEFT_OUT; keep.len()];
+        let mut order = Vec::new();
+        let mut starts = Vec::with_capacity(self.starts.len());
+        let mut s = 0;
+        for (j, &b) in self.order.iter().enumerate() {
+            while s < self.starts.len() && self.starts[s] == j {
+                starts.push(order.len());
+                s += 1;
+            }
+            if keep[j] {
+                local[j] = order.len() as u32;
+                order.push(b);
+            }
+        }
+        starts.resize(self.starts.len(), order.len());
+        let new_index = self.new_index.iter().map(|&j| local[j as usize]).collect();
+        let compact = Partition {
+            dims: self.dims,
+            subdomain: self.subdomain.clone(),
+            new_index,
+            order,
+            starts,
+        };
+        (compact, local)
     }
 }
 
@@ -340,6 +378,42 @@ mod tests {
     }
 
     proptest::proptest! {
+        /// A rank's numbering keeps the kept bodies in the partition's order, each subdomain's
+        /// (and the static ones) together in its own range, and maps each body to its place
+        /// there or leaves it out.
+        #[test]
+        fn a_compact_numbering_is_the_partitions_restricted(
+            subdomain in proptest::collection::vec(proptest::prop_oneof![0u32..6, proptest::strategy::Just(STATIC)], 0..200),
+            keep_seed in proptest::collection::vec(proptest::bool::ANY, 200),
+        ) {
+            let whole = Partition::from_subdomains([3, 2, 1], subdomain.clone());
+            let keep: Vec<bool> = (0..subdomain.len()).map(|j| keep_seed[j]).collect();
+            let (part, local) = whole.compact(&keep);
+            let kept: Vec<u32> = (0..whole.order.len())
+                .filter(|&j| keep[j])
+                .map(|j| whole.order[j])
+                .collect();
+            proptest::prop_assert_eq!(&part.order, &kept);
+            proptest::prop_assert_eq!(part.starts.len(), whole.starts.len());
+            for (s, w) in part.starts.windows(2).enumerate() {
+                for &i in &part.order[w[0]..w[1]] {
+                    proptest::prop_assert_eq!(subdomain[i as usize], s as u32);
+                }
+            }
+            for &i in &part.order[part.starts[6]..] {
+                proptest::prop_assert_eq!(subdomain[i as usize], STATIC);
+            }
+            for (i, &j) in whole.new_index.iter().enumerate() {
+                let l = part.new_index[i];
+                proptest::prop_assert_eq!(l, local[j as usize]);
+                if keep[j as usize] {
+                    proptest::prop_assert_eq!(part.order[l as usize], i as u32);
+                } else {
+                    proptest::prop_assert_eq!(l, LEFT_OUT);
+                }
+            }
+        }
+
         /// A partition built from the orders left by another scene (moved bodies, another
         /// dynamic set, or none at all) is the partition built afresh, whatever the number of
         /// bodies that changed places (few: repaired; many: sorted again).
