@@ -17,9 +17,9 @@ use crate::detection::{ghosts, Detector, RawContact};
 use crate::laws::{default_overlap_cap, driven_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
 use crate::solver::correction::{self, pseudo_velocities};
-use crate::solver::delassus::LocalBuilder;
+use crate::solver::delassus::{slot, LocalBuilder};
 use crate::solver::exchange::PairOwners;
-use crate::solver::partition::{self, SortedAxes, STATIC};
+use crate::solver::partition::{self, SortedAxes, LEFT_OUT, STATIC};
 use crate::solver::Exchange;
 use crate::solver::{
     ddm, CorrectionSettings, DdmSettings, DriveRows, LocalProblem, Nlgs, Partition, SolveReport,
@@ -323,9 +323,16 @@ struct Scratch {
     /// reads them).
     previous: ContactSet,
     locals: Vec<LocalProblem>,
+    /// The free velocities, then the solved ones, of the bodies that have a slot (see
+    /// `slots`); the free angular velocities and the correction's pseudo-velocities alike.
     solver_bodies: Vec<SolverBody>,
     free_w: Vec<DVec3>,
     pseudo: Vec<SolverBody>,
+    /// On ranks that hold their own pairs, where each body's solver body lies in
+    /// `solver_bodies` ([`LEFT_OUT`] for a grain neither owned nor read here: a rank keeps
+    /// solver bodies of its own grains, its ghosts and the bodies that are not grains only);
+    /// empty otherwise (every body at its own index).
+    slots: Vec<u32>,
     ddm_workspace: ddm::DdmWorkspace,
     /// Per body, the body whose velocities it takes in the solver (itself, or the body it is
     /// attached to); empty when no body is attached.
@@ -623,7 +630,8 @@ impl World {
         self.scratch.ddm_workspace.bodies()
     }
 
-    /// The solver bodies (free velocities after [`World::prepare`]).
+    /// The solver bodies (free velocities after [`World::prepare`]), one per body in body
+    /// order (on ranks that hold their own pairs, of the bodies up to date on the rank only).
     pub fn solver_bodies(&self) -> &[SolverBody] {
         &self.scratch.solver_bodies
     }
@@ -772,18 +780,30 @@ impl World {
         let max_penetration = self.max_over_contacts(0.0, |c, k| -c.gap[k]);
         times.detection = lap.lap();
 
-        // 2. Free velocities (on ranks that share the bodies, of those up to date here: no
-        // other is read).
+        // 2. Free velocities (on ranks that share the bodies, of those up to date here only,
+        // each in its slot: no other is read).
         let (b, fresh) = (&self.bodies, &self.detector.fresh);
         let (gravity, t0) = (s.gravity, self.time);
-        (0..b.len())
+        let slots = &mut self.scratch.slots;
+        slots.clear();
+        let mut up_to_date = Vec::new();
+        if !fresh.is_empty() {
+            slots.resize(b.len(), LEFT_OUT);
+            for i in (0..b.len()).filter(|&i| fresh[i]) {
+                slots[i] = up_to_date.len() as u32;
+                up_to_date.push(i as u32);
+            }
+        }
+        let all = fresh.is_empty();
+        (0..if all { b.len() } else { up_to_date.len() })
             .into_par_iter()
             .with_min_len(256)
-            .map(|i| match fresh.get(i) {
-                Some(false) => SolverBody::UNREAD,
-                _ => free_body(b, i, gravity, h, t0, t1),
+            .map(|k| {
+                let i = if all { k } else { up_to_date[k] as usize };
+                free_body(b, i, gravity, h, t0, t1)
             })
             .collect_into_vec(&mut self.scratch.solver_bodies);
+        let slots = &self.scratch.slots;
         self.drives.clear();
         for i in 0..b.len() {
             if let Some((d, limits)) = force_limited(b, i, t0, t1) {
@@ -794,7 +814,7 @@ impl World {
                     let t0 = self.time;
                     let excess = b.velocity[i] - d.program_velocity(t0).0 - d.superposed.at(t0).0;
                     let left = value_of(&self.drive_lag, i) - excess * (h * (1.0 - s.theta));
-                    let inv_mass = self.scratch.solver_bodies[i].inv_mass;
+                    let inv_mass = self.scratch.solver_bodies[slot(slots, i)].inv_mass;
                     for k in 0..3 {
                         let c = d.catch_up_speed[k];
                         if c > 0.0 && limits.force[k].is_finite() {
@@ -848,6 +868,7 @@ impl World {
             warm_start: self.settings.solver.warm_start,
             bodies: &self.bodies,
             solver_bodies: &self.scratch.solver_bodies,
+            slots: &self.scratch.slots,
             attach: &self.scratch.attach,
             overlap_law: self.overlap_law(),
         }
@@ -868,10 +889,13 @@ impl World {
         let (got, seconds) = self.detector.fetch(ex, &mut self.bodies, needed);
         let s = &self.settings;
         let (h, t0) = (s.dt, self.time);
+        // Each in a new slot.
+        let sc = &mut self.scratch;
         for i in got {
             let sb = free_body(&self.bodies, i, s.gravity, h, t0, t0 + h);
-            self.scratch.free_w[i] = sb.w;
-            self.scratch.solver_bodies[i] = sb;
+            sc.slots[i] = sc.solver_bodies.len() as u32;
+            sc.free_w.push(sb.w);
+            sc.solver_bodies.push(sb);
         }
         seconds
     }
@@ -1005,6 +1029,7 @@ impl World {
                     contacts,
                     &mut self.drives,
                     &mut sc.solver_bodies,
+                    &sc.slots,
                     Some(ddm::CorrectionPass {
                         settings: &s.correction,
                         h,
@@ -1028,10 +1053,12 @@ impl World {
         }
         // A driven body moves as its drive says: the position-only overlap correction pushes
         // the grains off it, not it off the grains.
+        // (Bodies that are not grains have a slot on every rank.)
+        let slots = std::mem::take(&mut self.scratch.slots);
         if corrected {
             for d in &self.drives {
-                self.scratch.pseudo[d.body as usize] =
-                    correction::at_rest(&self.scratch.pseudo[d.body as usize], false);
+                let k = slot(&slots, d.body as usize);
+                self.scratch.pseudo[k] = correction::at_rest(&self.scratch.pseudo[k], false);
             }
         }
         // Attached bodies move with the body they are part of.
@@ -1039,8 +1066,8 @@ impl World {
             let p = p as usize;
             if p != i {
                 let arm = self.bodies.position[i] - self.bodies.position[p];
-                let parent = self.scratch.solver_bodies[p];
-                let sb = &mut self.scratch.solver_bodies[i];
+                let parent = self.scratch.solver_bodies[slot(&slots, p)];
+                let sb = &mut self.scratch.solver_bodies[slot(&slots, i)];
                 sb.v = parent.v + parent.w.cross(arm);
                 sb.w = parent.w;
             }
@@ -1048,7 +1075,7 @@ impl World {
         // The drives' work over the step, at the velocities the update below moves with.
         for d in &self.drives {
             let i = d.body as usize;
-            let sb = &self.scratch.solver_bodies[i];
+            let sb = &self.scratch.solver_bodies[slot(&slots, i)];
             let vbar = sb.v * theta + self.bodies.velocity[i] * (1.0 - theta);
             let wbar = sb.w * theta + self.bodies.angular_velocity[i] * (1.0 - theta);
             let work = d.impulse_v.dot(vbar) + d.impulse_w.dot(wbar);
@@ -1094,9 +1121,10 @@ impl World {
                 {
                     return;
                 }
-                let (v1, w1) = (sbs[i].v, sbs[i].w);
+                let k = slot(&slots, i);
+                let (v1, w1) = (sbs[k].v, sbs[k].w);
                 let (pv, pw) = if corrected {
-                    (pseudo[i].v, pseudo[i].w)
+                    (pseudo[k].v, pseudo[k].w)
                 } else {
                     (DVec3::ZERO, DVec3::ZERO)
                 };
@@ -1110,7 +1138,7 @@ impl World {
                     r * DMat3::from_diagonal(d) * r.transpose()
                 };
                 if kind[i] == BodyKind::Dynamic {
-                    *l += world_inertia(q_old, inertia[i]) * (w1 - free_w[i]);
+                    *l += world_inertia(q_old, inertia[i]) * (w1 - free_w[k]);
                     *w = world_inertia(*q, inertia[i].recip()) * *l;
                 } else {
                     // Driven: L = I_w ω, so that a release needs no state change.
@@ -1118,6 +1146,7 @@ impl World {
                     *l = world_inertia(*q, inertia[i]) * w1;
                 }
             });
+        self.scratch.slots = slots;
         self.time += h;
         self.step_index += 1;
         times.other += lap.lap();

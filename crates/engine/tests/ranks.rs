@@ -178,7 +178,8 @@ fn a_rank_places_only_the_bodies_near_its_slabs() {
 /// Each rank builds the local problems of the subdomains and interface groups it owns and no
 /// others, and keeps those contacts only: over K ranks they add up to one process's, every
 /// contact's once, and no rank holds them all. Its solve numbers (and copies) only the bodies
-/// its part reads, fewer than one process's.
+/// its part reads, and it keeps solver bodies of the bodies up to date on it only: fewer than
+/// one process's.
 #[test]
 fn each_rank_builds_only_its_own_local_problems() {
     let make = || pile([2, 2, 1], true, false);
@@ -192,6 +193,11 @@ fn each_rank_builds_only_its_own_local_problems() {
     let bodies = alone.ddm_bodies();
     assert_eq!(bodies, alone.bodies.len(), "one process numbers every body");
     assert_eq!(
+        alone.solver_bodies().len(),
+        bodies,
+        "one process: every body's"
+    );
+    assert_eq!(
         all,
         alone.contacts.len(),
         "one process builds every contact's"
@@ -201,13 +207,24 @@ fn each_rank_builds_only_its_own_local_problems() {
             for _ in 0..steps {
                 w.step();
             }
-            (w.ddm_local_problems(), w.contacts.len(), w.ddm_bodies())
+            let slots = w.solver_bodies().len();
+            (
+                w.ddm_local_problems(),
+                w.contacts.len(),
+                w.ddm_bodies(),
+                slots,
+            )
         });
-        for (rank, &(mine, contacts, numbered)) in held.iter().enumerate() {
+        for (rank, &(mine, contacts, numbered, slots)) in held.iter().enumerate() {
             // Its own subdomains' bodies, the shared ones and the static ones.
             assert!(
                 numbered < bodies,
                 "{k} ranks, rank {rank}: {numbered} of {bodies} bodies numbered"
+            );
+            // Its own grains, its ghosts and the bodies that are not grains.
+            assert!(
+                slots < bodies,
+                "{k} ranks, rank {rank}: {slots} of {bodies} solver bodies"
             );
             assert_eq!(
                 contacts, mine,
@@ -223,6 +240,8 @@ fn each_rank_builds_only_its_own_local_problems() {
         // Every body is some rank's; the shared and static ones are every rank's.
         let numbered: usize = held.iter().map(|h| h.2).sum();
         assert!(numbered > bodies, "{k} ranks: {held:?} of {bodies} bodies");
+        let slots: usize = held.iter().map(|h| h.3).sum();
+        assert!(slots > bodies, "{k} ranks: {held:?} of {bodies} bodies");
     }
 }
 

@@ -24,7 +24,7 @@
 //! monolithic NLGS run in [`DdmProblem::equivalent_order`].
 
 use super::correction::{self, CorrectionSettings, Overlap};
-use super::delassus::{BodyAccess, LocalBuilder, LocalProblem, SolverBody};
+use super::delassus::{slot, BodyAccess, LocalBuilder, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
 use super::exchange::{self, Exchange, ShareBuffers, Unit};
 use super::nlgs::{Nlgs, SolveReport, SweepSums, TermCache};
@@ -1240,6 +1240,7 @@ pub fn solve_and_correct(
         Contacts::Built { locals, status },
         drives,
         bodies,
+        &[],
         correction,
     )
 }
@@ -1394,6 +1395,7 @@ pub(crate) fn solve_contacts(
     contacts: Contacts,
     drives: &mut [DriveRows],
     bodies: &mut [SolverBody],
+    slots: &[u32],
     correction: Option<CorrectionPass>,
 ) -> (SolveReport, DdmTimes, bool) {
     let mut times = DdmTimes::default();
@@ -1407,7 +1409,13 @@ pub(crate) fn solve_contacts(
         exchange: ex,
     } = ws;
     pb.clear();
-    pb.par_extend(partition.order.par_iter().map(|&i| bodies[i as usize]));
+    // (A rank's numbering keeps the bodies of groups that other ranks sweep, which need not
+    // be up to date here: they are read only once their owners have sent them.)
+    let solver_body = |i: u32| match slots.get(i as usize) {
+        Some(&LEFT_OUT) => SolverBody::UNREAD,
+        _ => bodies[slot(slots, i as usize)],
+    };
+    pb.par_extend(partition.order.par_iter().map(|&i| solver_body(i)));
     let n = match &contacts {
         Contacts::Built { locals, .. } => {
             let ranks = ex.as_ref().map(|e| (e.rank(), e.size()));
@@ -1591,14 +1599,22 @@ pub(crate) fn solve_contacts(
     }
 
     // 3. Back to the caller's numbering, in parallel over the caller's bodies and contacts.
-    // (A rank's own numbering leaves out bodies it does not read: theirs are left as they are.)
     let (new_index, pb_ref) = (&partition.new_index, pb.as_slice());
-    bodies
-        .par_iter_mut()
-        .with_min_len(1024)
-        .zip(new_index.par_iter())
-        .filter(|(_, &k)| k != LEFT_OUT)
-        .for_each(|(b, &k)| *b = pb_ref[k as usize]);
+    if slots.is_empty() {
+        bodies
+            .par_iter_mut()
+            .with_min_len(1024)
+            .zip(new_index.par_iter())
+            .for_each(|(b, &k)| *b = pb_ref[k as usize]);
+    } else {
+        // A rank's: each numbered body that has a slot here.
+        for (&i, b) in partition.order.iter().zip(pb_ref) {
+            match slots[i as usize] {
+                LEFT_OUT => {}
+                k => bodies[k as usize] = *b,
+            }
+        }
+    }
     let buckets: Vec<&Bucket> = p.buckets().collect();
     let solved = |(st, &(bi, k)): (&mut ContactStatus, &(u32, u32))| {
         let b = buckets[bi as usize];
@@ -1640,6 +1656,7 @@ pub(crate) fn solve_contacts(
             c,
             ranks.as_mut(),
             (&sub_mine, &group_mine),
+            (slots, bodies.len()),
         ),
         None => false,
     };
@@ -1661,6 +1678,7 @@ fn correct(
     c: CorrectionPass,
     mut ranks: Option<&mut Ranks>,
     (sub_mine, group_mine): (&[bool], &[bool]),
+    (slots, n_slots): (&[u32], usize),
 ) -> bool {
     let (smine, gmine) = (|s: usize| sub_mine[s], |g: usize| group_mine[g]);
     let starts = &partition.starts;
@@ -1719,16 +1737,24 @@ fn correct(
     }
     let pv = pv.as_slice();
     c.pseudo.clear();
-    c.pseudo.par_extend(
-        partition
-            .new_index
-            .par_iter()
-            .with_min_len(1024)
-            .map(|&k| match k {
-                LEFT_OUT => SolverBody::UNREAD,
-                k => pv[k as usize],
-            }),
-    );
+    if slots.is_empty() {
+        c.pseudo.par_extend(
+            partition
+                .new_index
+                .par_iter()
+                .with_min_len(1024)
+                .map(|&k| pv[k as usize]),
+        );
+    } else {
+        // A rank's: in the slots of the solver bodies.
+        c.pseudo.resize(n_slots, SolverBody::UNREAD);
+        for (&i, b) in partition.order.iter().zip(pv) {
+            match slots[i as usize] {
+                LEFT_OUT => {}
+                k => c.pseudo[k as usize] = *b,
+            }
+        }
+    }
     found
 }
 

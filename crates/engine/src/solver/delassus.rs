@@ -45,6 +45,16 @@ impl SolverBody {
     };
 }
 
+/// Where body `i`'s solver body lies among a rank's (`slots[i]`; see [`SolverBody::UNREAD`]),
+/// or at `i` when `slots` is empty: every body has one, in body order.
+#[inline]
+pub(crate) fn slot(slots: &[u32], i: usize) -> usize {
+    match slots.is_empty() {
+        true => i,
+        false => slots[i] as usize,
+    }
+}
+
 /// One contact's local problem.
 #[derive(Clone, Copy, Debug)]
 pub struct LocalProblem {
@@ -246,6 +256,8 @@ pub(crate) struct LocalBuilder<'a> {
     pub warm_start: bool,
     pub bodies: &'a BodySet,
     pub solver_bodies: &'a [SolverBody],
+    /// Where each body's solver body lies in `solver_bodies` (see [`slot`]).
+    pub slots: &'a [u32],
     pub attach: &'a [u32],
     pub overlap_law: Option<(Elastic, [f64; 2])>,
 }
@@ -265,26 +277,24 @@ impl LocalBuilder<'_> {
     /// Contact `k`'s local problem, bodies in the caller's numbering.
     #[inline]
     pub fn at(&self, k: usize) -> LocalProblem {
-        let (contacts, bodies, solver_bodies) = (self.contacts, self.bodies, self.solver_bodies);
+        let (contacts, bodies) = (self.contacts, self.bodies);
         let (b1, b2) = self.bodies_of(k);
         let (b1, b2) = (b1 as usize, b2 as usize);
+        let (s1, s2) = (
+            &self.solver_bodies[slot(self.slots, b1)],
+            &self.solver_bodies[slot(self.slots, b2)],
+        );
         // The frame as the sweep rebuilds it from `[n, t]`.
         let [n, t, _] = contacts.frame[k];
         let e = [n, t, n.cross(t)];
         let x = contacts.point[k];
         let (r1, r2) = (x - bodies.position[b1], x - bodies.position[b2]);
-        let w = Sym3::from_mat(delassus_block(
-            &e,
-            r1,
-            r2,
-            &solver_bodies[b1],
-            &solver_bodies[b2],
-        ));
+        let w = Sym3::from_mat(delassus_block(&e, r1, r2, s1, s2));
         LocalProblem {
             body1: b1 as u32,
             body2: b2 as u32,
-            dynamic1: solver_bodies[b1].writable(),
-            dynamic2: solver_bodies[b2].writable(),
+            dynamic1: s1.writable(),
+            dynamic2: s2.writable(),
             frame: [n, t],
             r1,
             r2,
