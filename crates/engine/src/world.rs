@@ -794,12 +794,16 @@ impl World {
                 up_to_date.push(i as u32);
             }
         }
-        let all = fresh.is_empty();
-        (0..if all { b.len() } else { up_to_date.len() })
+        let count = if fresh.is_empty() {
+            b.len()
+        } else {
+            up_to_date.len()
+        };
+        (0..count)
             .into_par_iter()
             .with_min_len(256)
             .map(|k| {
-                let i = if all { k } else { up_to_date[k] as usize };
+                let i = up_to_date.get(k).map_or(k, |&i| i as usize);
                 free_body(b, i, gravity, h, t0, t1)
             })
             .collect_into_vec(&mut self.scratch.solver_bodies);
@@ -1054,10 +1058,10 @@ impl World {
         // A driven body moves as its drive says: the position-only overlap correction pushes
         // the grains off it, not it off the grains.
         // (Bodies that are not grains have a slot on every rank.)
-        let slots = std::mem::take(&mut self.scratch.slots);
+        let slots = &self.scratch.slots;
         if corrected {
             for d in &self.drives {
-                let k = slot(&slots, d.body as usize);
+                let k = slot(slots, d.body as usize);
                 self.scratch.pseudo[k] = correction::at_rest(&self.scratch.pseudo[k], false);
             }
         }
@@ -1066,8 +1070,8 @@ impl World {
             let p = p as usize;
             if p != i {
                 let arm = self.bodies.position[i] - self.bodies.position[p];
-                let parent = self.scratch.solver_bodies[slot(&slots, p)];
-                let sb = &mut self.scratch.solver_bodies[slot(&slots, i)];
+                let parent = self.scratch.solver_bodies[slot(slots, p)];
+                let sb = &mut self.scratch.solver_bodies[slot(slots, i)];
                 sb.v = parent.v + parent.w.cross(arm);
                 sb.w = parent.w;
             }
@@ -1075,7 +1079,7 @@ impl World {
         // The drives' work over the step, at the velocities the update below moves with.
         for d in &self.drives {
             let i = d.body as usize;
-            let sb = &self.scratch.solver_bodies[slot(&slots, i)];
+            let sb = &self.scratch.solver_bodies[slot(slots, i)];
             let vbar = sb.v * theta + self.bodies.velocity[i] * (1.0 - theta);
             let wbar = sb.w * theta + self.bodies.angular_velocity[i] * (1.0 - theta);
             let work = d.impulse_v.dot(vbar) + d.impulse_w.dot(wbar);
@@ -1121,7 +1125,7 @@ impl World {
                 {
                     return;
                 }
-                let k = slot(&slots, i);
+                let k = slot(slots, i);
                 let (v1, w1) = (sbs[k].v, sbs[k].w);
                 let (pv, pw) = if corrected {
                     (pseudo[k].v, pseudo[k].w)
@@ -1146,7 +1150,6 @@ impl World {
                     *l = world_inertia(*q, inertia[i]) * w1;
                 }
             });
-        self.scratch.slots = slots;
         self.time += h;
         self.step_index += 1;
         times.other += lap.lap();

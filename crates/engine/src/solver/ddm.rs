@@ -1607,13 +1607,7 @@ pub(crate) fn solve_contacts(
             .zip(new_index.par_iter())
             .for_each(|(b, &k)| *b = pb_ref[k as usize]);
     } else {
-        // A rank's: each numbered body that has a slot here.
-        for (&i, b) in partition.order.iter().zip(pb_ref) {
-            match slots[i as usize] {
-                LEFT_OUT => {}
-                k => bodies[k as usize] = *b,
-            }
-        }
+        to_slots(partition, slots, pb_ref, bodies);
     }
     let buckets: Vec<&Bucket> = p.buckets().collect();
     let solved = |(st, &(bi, k)): (&mut ContactStatus, &(u32, u32))| {
@@ -1746,16 +1740,21 @@ fn correct(
                 .map(|&k| pv[k as usize]),
         );
     } else {
-        // A rank's: in the slots of the solver bodies.
         c.pseudo.resize(n_slots, SolverBody::UNREAD);
-        for (&i, b) in partition.order.iter().zip(pv) {
-            match slots[i as usize] {
-                LEFT_OUT => {}
-                k => c.pseudo[k as usize] = *b,
-            }
-        }
+        to_slots(partition, slots, pv, c.pseudo);
     }
     found
+}
+
+/// Writes each body numbered by a rank's `partition` (`numbered`, solver numbering) to its
+/// slot in `out`, if it has one here (see [`slot`]).
+fn to_slots(partition: &Partition, slots: &[u32], numbered: &[SolverBody], out: &mut [SolverBody]) {
+    for (&i, b) in partition.order.iter().zip(numbered) {
+        match slots[i as usize] {
+            LEFT_OUT => {}
+            k => out[k as usize] = *b,
+        }
+    }
 }
 
 /// Whether the terms of the buckets' hot contacts (see [`Bucket::hot`], listed by the last
