@@ -12,7 +12,7 @@
 //!    (see [`crate::solver::correction`]), which leaves the velocities untouched.
 
 use crate::bodies::{BodyKind, BodySet, Limits};
-use crate::contacts::{ContactSet, Skeleton};
+use crate::contacts::ContactSet;
 use crate::detection::{ghosts, Detector, RawContact};
 use crate::laws::{default_overlap_cap, driven_overlap_cap, Elastic, FrictionTable, NormalLaw};
 use crate::math::{DMat3, DQuat, DVec3};
@@ -305,9 +305,9 @@ pub struct World {
     /// The ranks this world's DDM solves are shared with, in a run distributed over processes
     /// (see [`crate::solver::exchange`]); `None`: it solves alone.
     exchange: Option<Arc<dyn Exchange>>,
-    /// When each rank holds its own pairs ([`World::holds_contact`]): every contact of the
-    /// step as all ranks see it, and where this rank's are among them.
-    pub(crate) skeleton: Skeleton,
+    /// When each rank holds its own pairs ([`World::holds_contact`]): the step's number of
+    /// contacts over all ranks (counted by the solve's census).
+    pub(crate) contact_total: usize,
     /// The step pipeline's buffers: nothing in them carries over from one step to the next
     /// (see [`World::release_scratch`]).
     scratch: Scratch,
@@ -371,7 +371,7 @@ impl World {
             drive_lag: Vec::new(),
             drives: Vec::new(),
             exchange: None,
-            skeleton: Skeleton::default(),
+            contact_total: 0,
             scratch: Scratch::default(),
         }
         .with_attached_velocities()
@@ -771,12 +771,6 @@ impl World {
             self.detector.radii(),
         );
         times.communication = self.detector.shared_seconds + ghost_seconds;
-        if self.detector.hold {
-            let ex = self.exchange.as_deref().expect("a rank holds pairs");
-            let (skeleton, seconds) = Skeleton::gather(ex, &self.contacts);
-            self.skeleton = skeleton;
-            times.communication += seconds;
-        }
         let max_penetration = self.max_over_contacts(0.0, |c, k| -c.gap[k]);
         times.detection = lap.lap();
 
@@ -964,23 +958,16 @@ impl World {
                 self.scratch.ddm_workspace.exchange = self.exchange.clone();
                 let hold = self.detector.hold;
                 if hold {
-                    // Each rank holds its own pairs: the step's contacts are bucketed from the
-                    // skeleton, the pairs whose bucket another rank solves move there, then
+                    // Each rank holds its own pairs: the ranks count their contacts per
+                    // bucket, the pairs whose bucket another rank solves move there, then
                     // each rank builds its buckets from the contacts it holds.
                     let ex = self.exchange.clone().expect("a rank holds pairs");
                     let mut ws = std::mem::take(&mut self.scratch.ddm_workspace);
-                    let (skeleton, attach) = (&self.skeleton, &self.scratch.attach);
-                    let bodies_of = |g: usize| {
-                        let (a, b) = skeleton.bodies[g];
-                        match attach.is_empty() {
-                            true => (a, b),
-                            false => (attach[a as usize], attach[b as usize]),
-                        }
-                    };
-                    ws.plan(
+                    let (c, attach) = (&self.contacts, &self.scratch.attach);
+                    times.communication += ws.census(
                         &partition,
-                        skeleton.bodies.len(),
-                        bodies_of,
+                        c.len(),
+                        |k| solved_as(attach, c, k),
                         d.parallel_interface,
                     );
                     let owners = ws.pair_owners(&partition, ex.size(), attach);
@@ -988,17 +975,18 @@ impl World {
                     times.communication += self.contacts.migrate(&*ex, &owners);
                     // The bodies this solve gives the rank that it was not sent as ghosts.
                     times.communication += self.fetch_solved(&*ex, &owners);
-                    self.skeleton.locate(&self.contacts);
-                    debug_assert!(self
-                        .skeleton
-                        .global
-                        .iter()
-                        .all(|&g| ws.planned_owner(g as usize) == ex.rank()));
+                    let (c, attach) = (&self.contacts, &self.scratch.attach);
+                    ws.place_held(
+                        &partition,
+                        c.len(),
+                        |k| solved_as(attach, c, k),
+                        d.parallel_interface,
+                    );
                     // The rank numbers only the bodies its part of the solve reads.
                     partition = ws.compact(&partition, &self.drives);
-                    let local = self.skeleton.local_of();
                     let builder = self.local_builder();
-                    ws.fill(&partition, |g| builder.at(local[g] as usize));
+                    ws.fill(&partition, |k| builder.at(k));
+                    self.contact_total = ws.contact_total();
                     self.scratch.ddm_workspace = ws;
                     // The next detection tests each pair where this solve holds it.
                     self.detector.owners = Some(owners);
@@ -1012,7 +1000,6 @@ impl World {
                     ddm::Contacts::Held {
                         impulse: &mut cs.impulse,
                         status: &mut cs.status,
-                        global: &self.skeleton.global,
                     }
                 } else if built {
                     ddm::Contacts::Built {
@@ -1164,6 +1151,16 @@ impl World {
             deepest,
             times,
         }
+    }
+}
+
+/// The bodies contact `k` of `c` is solved between: its own, or, for a body attached to
+/// another (`attach[i]`, empty when none is), that one.
+fn solved_as(attach: &[u32], c: &ContactSet, k: usize) -> (u32, u32) {
+    let (a, b) = (c.body1[k], c.body2[k]);
+    match attach.is_empty() {
+        true => (a, b),
+        false => (attach[a as usize], attach[b as usize]),
     }
 }
 

@@ -698,10 +698,10 @@ fn checkpoints_cover_all_state_fields() {
             // how the process runs, not what it simulates: the ranks a distributed run
             // shares its solves with, set by the front end on every start and resume
             "exchange",
-            // rebuilt every step when the ranks hold their own contacts: every contact's
-            // bodies in pair order (the parts of a checkpoint are indexed by it; a resumed
-            // world has every contact on every rank until its first step)
-            "skeleton",
+            // counted every step when the ranks hold their own contacts: the step's number
+            // of contacts over all ranks (stored in the checkpoint's manifest; a resumed world
+            // has every contact on every rank until its first step)
+            "contact_total",
         ],
         "World",
     );

@@ -9,7 +9,6 @@ use crate::math::{frame_from_normal, DVec3};
 use crate::slices::reserve_total;
 
 mod ranks;
-pub(crate) use ranks::Skeleton;
 
 /// All contacts of a step, as a structure of arrays, sorted by body pair.
 #[derive(Clone, Debug, Default)]

@@ -41,20 +41,22 @@ impl World {
         }
     }
 
-    /// The step's number of contacts over all ranks (no collective: the skeleton has it).
+    /// The step's number of contacts over all ranks (no collective: the solve counted them).
     pub fn contact_total(&self) -> usize {
         match self.detector.hold {
-            true => self.skeleton.bodies.len(),
+            true => self.contact_total,
             false => self.contacts.len(),
         }
     }
 
-    /// The place of this rank's contact `k` among the step's contacts of all ranks (in pair
-    /// order).
-    pub(crate) fn contact_index(&self, k: usize) -> usize {
-        match self.detector.hold {
-            true => self.skeleton.global[k] as usize,
-            false => k,
+    /// The place of each contact this rank holds among the step's contacts of all ranks (in
+    /// pair order, a single process's contact order). A collective when each rank holds its
+    /// own contacts.
+    pub(crate) fn contact_places(&self) -> Vec<u32> {
+        let c = &self.contacts;
+        match (self.exchange(), self.detector.hold) {
+            (Some(ex), true) => places(ex, c),
+            _ => (0..c.len() as u32).collect(),
         }
     }
 
@@ -129,20 +131,6 @@ impl ContactSet {
     }
 }
 
-/// The step's contacts as every rank sees them when each rank holds its own (see
-/// [`World::holds_contact`]): each contact's bodies in pair order — a single process's
-/// contact order, which the domain decomposition buckets — and the place there of each
-/// contact this rank holds.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct Skeleton {
-    /// Each contact's bodies (body 1, body 2), in pair order.
-    pub bodies: Vec<(u32, u32)>,
-    /// Each pair with contacts, in pair order: its key and its first contact's place.
-    runs: Vec<((u32, u32), u32)>,
-    /// The place in `bodies` of each contact this rank holds, in its order.
-    pub global: Vec<u32>,
-}
-
 /// Unordered pair key of contact `k`.
 fn key_of(c: &ContactSet, k: usize) -> (u32, u32) {
     let (a, b) = (c.body1[k], c.body2[k]);
@@ -158,61 +146,33 @@ fn pair_starts(c: &ContactSet) -> Vec<usize> {
     starts
 }
 
-impl Skeleton {
-    /// Gathers the skeleton from every rank's held contacts `c` (a collective). Returns it
-    /// and the seconds spent sharing.
-    pub(crate) fn gather(ex: &dyn Exchange, c: &ContactSet) -> (Self, f64) {
-        let starts = pair_starts(c);
-        let mut mine = Vec::with_capacity(3 * starts.len());
-        for w in starts.windows(2) {
-            let k = w[0];
-            mine.extend_from_slice(&[
-                f64::from(c.body1[k]),
-                f64::from(c.body2[k]),
-                (w[1] - w[0]) as f64,
-            ]);
-        }
-        let t = std::time::Instant::now();
-        let (all, counts) = exchange::gather_varying(ex, &mine);
-        let seconds = t.elapsed().as_secs_f64();
-        let mut s = Skeleton {
-            bodies: Vec::with_capacity(all.chunks_exact(3).map(|x| x[2] as usize).sum()),
-            runs: Vec::with_capacity(all.len() / 3),
-            global: Vec::new(),
-        };
-        in_pair_order(&all, &counts, 3, |x| {
-            let (a, b) = (x[0] as u32, x[1] as u32);
-            s.runs.push(((a.min(b), a.max(b)), s.bodies.len() as u32));
-            s.bodies.extend(std::iter::repeat_n((a, b), x[2] as usize));
-        });
-        s.locate(c);
-        (s, seconds)
+/// [`World::contact_places`] of the contacts `c` this rank holds, each rank holding its own:
+/// every pair's contact count from the ranks (a collective), in pair order, and the place
+/// of each of this rank's pairs there.
+fn places(ex: &dyn Exchange, c: &ContactSet) -> Vec<u32> {
+    let starts = pair_starts(c);
+    let mut mine = Vec::with_capacity(3 * starts.len());
+    for w in starts.windows(2) {
+        let (a, b) = key_of(c, w[0]);
+        mine.extend_from_slice(&[f64::from(a), f64::from(b), (w[1] - w[0]) as f64]);
     }
-
-    /// Places this rank's contacts `c` (the skeleton's pairs, moved between ranks since).
-    pub(crate) fn locate(&mut self, c: &ContactSet) {
-        self.global.clear();
-        let starts = pair_starts(c);
-        for w in starts.windows(2) {
-            let key = key_of(c, w[0]);
-            let r = self
-                .runs
-                .binary_search_by_key(&key, |r| r.0)
-                .expect("a held pair is in the skeleton");
-            let first = self.runs[r].1;
-            self.global.extend(first..first + (w[1] - w[0]) as u32);
-        }
+    let (all, counts) = exchange::gather_varying(ex, &mine);
+    // Each pair's key and its first contact's place, in pair order.
+    let mut runs: Vec<((u32, u32), u32)> = Vec::with_capacity(all.len() / 3);
+    let mut total = 0;
+    in_pair_order(&all, &counts, 3, |x| {
+        runs.push(((x[0] as u32, x[1] as u32), total));
+        total += x[2] as u32;
+    });
+    let mut places = Vec::with_capacity(c.len());
+    for w in starts.windows(2) {
+        let r = runs
+            .binary_search_by_key(&key_of(c, w[0]), |r| r.0)
+            .expect("a held pair is among the ranks' pairs");
+        let first = runs[r].1;
+        places.extend(first..first + (w[1] - w[0]) as u32);
     }
-
-    /// For each of the step's contacts, its index among this rank's (`u32::MAX`: another
-    /// rank's).
-    pub(crate) fn local_of(&self) -> Vec<u32> {
-        let mut local = vec![u32::MAX; self.bodies.len()];
-        for (i, &g) in self.global.iter().enumerate() {
-            local[g as usize] = i as u32;
-        }
-        local
-    }
+    places
 }
 
 impl ContactSet {

@@ -23,6 +23,8 @@
 //! bit-identical results for any number of threads. With `n = m = 1` the iterate is exactly
 //! monolithic NLGS run in [`DdmProblem::equivalent_order`].
 
+mod census;
+
 use super::correction::{self, CorrectionSettings, Overlap};
 use super::delassus::{slot, BodyAccess, LocalBuilder, LocalProblem, SolverBody};
 use super::drive::{self, DriveRows};
@@ -143,9 +145,9 @@ pub struct DdmTimes {
 /// Contacts solved together (a subdomain's, or an interface group's), bodies in solver
 /// numbering.
 ///
-/// In a solve distributed over ranks, a bucket another rank owns is *remote*: its local
-/// problems are not built here (`locals` stays empty; `origin` and `status` list its
-/// contacts), and its contacts are held by its owner.
+/// In a solve distributed over ranks, a bucket another rank owns is *remote*: its contacts
+/// are held by its owner, and only their number is known here (`locals`, `origin` and
+/// `status` stay empty).
 #[derive(Clone, Debug, Default)]
 pub struct Bucket {
     /// The local problems (empty when the bucket is remote).
@@ -161,6 +163,8 @@ pub struct Bucket {
     hot: Vec<u32>,
     /// Whether another rank owns this bucket (see above).
     pub remote: bool,
+    /// The number of contacts of a remote bucket.
+    remote_len: usize,
 }
 
 impl Bucket {
@@ -172,10 +176,10 @@ impl Bucket {
         self.list(members);
     }
 
-    /// Lists the contacts `members` of a remote bucket (no local problem built).
-    fn fill_remote(&mut self, members: &[u32]) {
+    /// Makes it a remote bucket of `len` contacts.
+    fn set_remote(&mut self, len: usize) {
         self.remote = true;
-        self.list(members);
+        self.remote_len = len;
     }
 
     /// Appends the contacts `members` to the bucket's list, their status unknown.
@@ -188,13 +192,14 @@ impl Bucket {
             .resize(self.origin.len(), ContactStatus::NoContact);
     }
 
-    /// Appends contact `origin`: its local problem `make()`, not called when remote.
+    /// Appends contact `origin`, its local problem `make()` (nothing when remote: its
+    /// length is known already).
     fn push(&mut self, make: impl FnOnce() -> LocalProblem, origin: u32) {
         if !self.remote {
             self.locals.push(make());
+            self.origin.push(origin);
+            self.status.push(ContactStatus::NoContact);
         }
-        self.origin.push(origin);
-        self.status.push(ContactStatus::NoContact);
     }
 
     fn clear(&mut self) {
@@ -204,16 +209,20 @@ impl Bucket {
         self.terms.clear();
         self.hot.clear();
         self.remote = false;
+        self.remote_len = 0;
     }
 
-    /// Number of contacts.
+    /// Number of contacts (on every rank: a remote bucket's too).
     pub fn len(&self) -> usize {
-        self.origin.len()
+        match self.remote {
+            true => self.remote_len,
+            false => self.origin.len(),
+        }
     }
 
-    /// Whether it holds no contact.
+    /// Whether it has no contact.
     pub fn is_empty(&self) -> bool {
-        self.origin.is_empty()
+        self.len() == 0
     }
 
     /// Contact `k`'s impulse after the solve (a bucket of this rank's).
@@ -253,6 +262,8 @@ pub struct DdmProblem {
     slot: Vec<(u32, u32)>,
     /// Scratch of [`DdmProblem::plan`]: Γ's contacts (caller's indices) by subdomain pair.
     gamma: Vec<((u32, u32), u32)>,
+    /// Each subdomain's number of contacts (over all ranks).
+    sub_total: Vec<usize>,
     /// The interface groups' buckets of the step before, emptied: the next groups take
     /// them, so that Γ's local problems are not copied again as their vectors grow.
     spare: Vec<Bucket>,
@@ -318,25 +329,53 @@ impl DdmProblem {
     ) {
         let k = partition.count();
         let ranks = ranks.filter(|&(_, size)| size > 1);
-        // Each contact's subdomain (`STATIC`: Γ), read in parallel.
-        let subdomain = |idx: usize| {
-            let (b1, b2) = bodies_of(idx);
-            (
-                partition.subdomain[b1 as usize],
-                partition.subdomain[b2 as usize],
-            )
-        };
+        self.sort_contacts(partition, n, &bodies_of, parallel_interface);
+        // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily,
+        // give each group its rank.
+        let mut runs: Vec<((u32, u32), usize)> = Vec::new();
+        for &(pair, _) in self.gamma.iter() {
+            match runs.last_mut() {
+                Some((p, count)) if *p == pair => *count += 1,
+                _ => runs.push((pair, 1)),
+            }
+        }
+        self.sub_total.clear();
+        self.sub_total.extend(self.members.iter().map(Vec::len));
+        self.make_groups(&runs, k, ranks);
+        self.place_gamma(k);
+        if ranks.is_some() {
+            // The bodies each group shares.
+            let dynamic = partition.starts[k] as u32;
+            for &(_, idx) in &self.gamma {
+                let group = &mut self.groups[self.slot[idx as usize].0 as usize - k];
+                let (b1, b2) = bodies_of(idx as usize);
+                for b in [b1, b2].map(|b| partition.new_index[b as usize]) {
+                    if b < dynamic {
+                        group.bodies.push(b);
+                    }
+                }
+            }
+            for g in &mut self.groups {
+                g.bodies.sort_unstable();
+                g.bodies.dedup();
+            }
+        }
+    }
+
+    /// Each of the `n` contacts' bucket: a subdomain's (`members`, `slot`), or Γ's (`gamma`,
+    /// sorted by group pair, then the caller's order).
+    fn sort_contacts(
+        &mut self,
+        partition: &Partition,
+        n: usize,
+        bodies_of: &(impl Fn(usize) -> (u32, u32) + Sync),
+        parallel_interface: bool,
+    ) {
+        let k = partition.count();
         let owners: Vec<u32> = (0..n)
             .into_par_iter()
             .with_min_len(4096)
-            .map(|c| match subdomain(c) {
-                (a, b) if a == b => a,
-                (STATIC, b) => b,
-                (a, STATIC) => a,
-                // Two static bodies never make a contact (detection skips them): `STATIC`
-                // keeps it in Γ.
-                _ => STATIC,
-            })
+            .map(|c| home(partition, bodies_of(c)))
             .collect();
         self.members.resize_with(k, Vec::new);
         self.members.iter_mut().for_each(Vec::clear);
@@ -351,37 +390,35 @@ impl DdmProblem {
                 self.slot[idx] = (owner, members.len() as u32);
                 members.push(idx as u32);
             } else {
-                let pair = if parallel_interface {
-                    let (s1, s2) = subdomain(idx);
-                    (s1.min(s2), s1.max(s2))
-                } else {
-                    (STATIC, STATIC)
-                };
+                let pair = group_pair(partition, bodies_of(idx), parallel_interface);
                 gamma.push((pair, idx as u32));
             }
         }
-        // Group Γ by pair (stable: caller's order within a group), colour the pairs greedily,
-        // give each group its rank.
         gamma.sort_unstable();
-        let mut runs: Vec<((u32, u32), usize)> = Vec::new();
-        for &(pair, _) in gamma.iter() {
-            match runs.last_mut() {
-                Some((p, count)) if *p == pair => *count += 1,
-                _ => runs.push((pair, 1)),
-            }
-        }
-        let (colour, colours) = colour_groups(&runs, k);
+    }
+
+    /// The interface groups of Γ's `runs` (each group's pair, in pair order, and its
+    /// contacts over all ranks) between `k` subdomains: their colours and ranks, their
+    /// buckets empty (a remote one knowing its length).
+    fn make_groups(
+        &mut self,
+        runs: &[((u32, u32), usize)],
+        k: usize,
+        ranks: Option<(usize, usize)>,
+    ) {
+        let (colour, colours) = colour_groups(runs, k);
         let size = ranks.map_or(1, |(_, size)| size);
-        let owner = group_owners(&runs, &colour, colours, k, size);
+        let owner = group_owners(runs, &colour, colours, k, size);
         for g in self.groups.drain(..) {
             let mut bucket = g.bucket;
             bucket.clear();
             self.spare.push(bucket);
         }
-        let dynamic = partition.starts[k] as u32;
-        for (r, &(pair, _)) in runs.iter().enumerate() {
+        for (r, &(pair, count)) in runs.iter().enumerate() {
             let mut bucket = self.spare.pop().unwrap_or_default();
-            bucket.remote = ranks.is_some_and(|(me, _)| owner[r] != me);
+            if ranks.is_some_and(|(me, _)| owner[r] != me) {
+                bucket.set_remote(count);
+            }
             self.groups.push(InterfaceGroup {
                 pair,
                 colour: colour[r],
@@ -390,39 +427,17 @@ impl DdmProblem {
                 bodies: Vec::new(),
             });
         }
-        // Each Γ contact's group (in pair order here), and the bodies each group shares.
+        self.colours = colours;
+    }
+
+    /// Each Γ contact's group (the groups in pair order here) in `slot`.
+    fn place_gamma(&mut self, k: usize) {
         let mut g = 0;
-        for &(pair, idx) in gamma.iter() {
+        for &(pair, idx) in self.gamma.iter() {
             while self.groups[g].pair != pair {
                 g += 1;
             }
             self.slot[idx as usize] = ((k + g) as u32, 0);
-            if ranks.is_some() {
-                let group = &mut self.groups[g];
-                let (b1, b2) = bodies_of(idx as usize);
-                for b in [b1, b2].map(|b| partition.new_index[b as usize]) {
-                    if b < dynamic {
-                        group.bodies.push(b);
-                    }
-                }
-            }
-        }
-        if ranks.is_some() {
-            for g in &mut self.groups {
-                g.bodies.sort_unstable();
-                g.bodies.dedup();
-            }
-        }
-        self.colours = colours;
-    }
-
-    /// The rank whose bucket contact `idx` is in, after [`DdmProblem::plan`] over `size`
-    /// ranks.
-    pub(crate) fn planned_owner(&self, idx: usize, size: usize) -> usize {
-        let k = self.members.len();
-        match self.slot[idx].0 as usize {
-            s if s < k => exchange::owner(s, k, size),
-            g => self.groups[g - k].owner,
         }
     }
 
@@ -445,6 +460,7 @@ impl DdmProblem {
             l
         };
         self.sub.resize_with(k, Bucket::default);
+        let total = &self.sub_total;
         self.sub
             .par_iter_mut()
             .zip(self.members.par_iter())
@@ -452,21 +468,27 @@ impl DdmProblem {
             .for_each(|(s, (bucket, members))| {
                 bucket.clear();
                 if remote_sub(s) {
-                    bucket.fill_remote(members);
+                    bucket.set_remote(total[s]);
                 } else {
                     bucket.fill(members, renumber);
                 }
             });
+        // Γ's contacts into their groups, then the groups in the sweeps' order.
+        let m = self.groups.len();
+        let mut order: Vec<usize> = (0..m).collect();
+        order.sort_by_key(|&g| (self.groups[g].colour, self.groups[g].pair));
+        let mut sorted = vec![0; m];
+        for (new, &old) in order.iter().enumerate() {
+            sorted[old] = (k + new) as u32;
+        }
+        let mut next = vec![0; m];
         for &(_, idx) in &self.gamma {
             let g = self.slot[idx as usize].0 as usize - k;
             self.groups[g].bucket.push(|| renumber(idx), idx);
+            self.slot[idx as usize] = (sorted[g], next[g]);
+            next[g] += 1;
         }
         self.groups.sort_by_key(|g| (g.colour, g.pair));
-        for (gi, g) in self.groups.iter().enumerate() {
-            for (place, &idx) in g.bucket.origin.iter().enumerate() {
-                self.slot[idx as usize] = ((k + gi) as u32, place as u32);
-            }
-        }
     }
 
     /// The buckets in the equivalent order: subdomains, then Γ by colour and group.
@@ -761,6 +783,34 @@ impl Wire for Option<f64> {
     fn take(x: &[f64]) -> Self {
         (x[0] == 1.0).then_some(x[1])
     }
+}
+
+/// The subdomain a contact between bodies `(b1, b2)` is solved in: the subdomain of both,
+/// or of the one that is not static; [`STATIC`] for Γ (two static bodies never make a
+/// contact, detection skips them: [`STATIC`] keeps such a one in Γ).
+fn home(partition: &Partition, (b1, b2): (u32, u32)) -> u32 {
+    match (
+        partition.subdomain[b1 as usize],
+        partition.subdomain[b2 as usize],
+    ) {
+        (a, b) if a == b => a,
+        (STATIC, b) => b,
+        (a, STATIC) => a,
+        _ => STATIC,
+    }
+}
+
+/// The interface group of a Γ contact between bodies `(b1, b2)`: its two subdomains, in
+/// order, or `(STATIC, STATIC)` when Γ is solved as one sequential group.
+fn group_pair(partition: &Partition, (b1, b2): (u32, u32), parallel_interface: bool) -> (u32, u32) {
+    if !parallel_interface {
+        return (STATIC, STATIC);
+    }
+    let (s1, s2) = (
+        partition.subdomain[b1 as usize],
+        partition.subdomain[b2 as usize],
+    );
+    (s1.min(s2), s1.max(s2))
 }
 
 /// Greedy colouring of Γ's groups (`runs`: each group's pair and contact count, in pair
@@ -1137,26 +1187,6 @@ impl<'a> Ranks<'a> {
             .collect();
         self.share(&units, &mut [], results);
     }
-
-    /// Every bucket's per-contact terms `terms` (buckets in the equivalent order), from its
-    /// owner, the only rank that has its local problems.
-    fn share_terms(&mut self, p: &DdmProblem, terms: &mut [f64]) {
-        let t = Instant::now();
-        let units: Vec<Unit> = self
-            .sub_owner
-            .iter()
-            .chain(&self.group_owner)
-            .zip(p.buckets())
-            .map(|(&owner, b)| Unit {
-                owner,
-                bodies: &[],
-                values: b.len(),
-                readers: &[],
-            })
-            .collect();
-        exchange::share(self.ex, &units, &mut [], terms, &mut self.buf);
-        self.seconds += t.elapsed().as_secs_f64();
-    }
 }
 
 /// Solves the step's contact problem by Algorithm 1. `locals` and `bodies` are in the
@@ -1206,8 +1236,6 @@ pub struct DdmWorkspace {
     pb: Vec<SolverBody>,
     /// Pseudo-velocities of the correction, solver numbering.
     pv: Vec<SolverBody>,
-    /// Per-contact terms of a sum, in the equivalent order.
-    terms: Vec<f64>,
     /// The drives, bodies in solver numbering.
     drives: Vec<DriveRows>,
     /// The ranks of a run distributed over processes (`None`: this process solves alone);
@@ -1259,13 +1287,12 @@ pub(crate) enum Contacts<'a> {
         impulse: &'a mut [DVec3],
         status: &'a mut [ContactStatus],
     },
-    /// Built into their buckets by [`DdmWorkspace::plan`] and [`DdmWorkspace::fill`] from the
-    /// contacts this rank holds, the `global[i]`-th of the step's for its `i`-th: impulses
-    /// and statuses written to `impulse` and `status` (one per contact held).
+    /// Built into their buckets by [`DdmWorkspace::place_held`] and [`DdmWorkspace::fill`]
+    /// from the contacts this rank holds: impulses and statuses written to `impulse` and
+    /// `status` (one per contact held).
     Held {
         impulse: &'a mut [DVec3],
         status: &'a mut [ContactStatus],
-        global: &'a [u32],
     },
 }
 
@@ -1300,28 +1327,44 @@ impl DdmWorkspace {
         exchange::PairOwners::new(partition, groups, size, attach)
     }
 
-    /// Buckets the step's `n` contacts (contact `k` joins `bodies_of(k)`) by `partition`
-    /// without building any local problem: afterwards [`DdmWorkspace::planned_owner`] says
-    /// which rank solves each, and [`DdmWorkspace::fill`] builds them.
-    pub(crate) fn plan(
+    /// The step's buckets over the ranks, from the `n` contacts this rank holds (contact `k`
+    /// joins `bodies_of(k)`), without building any local problem (see
+    /// [`DdmProblem::census`]): afterwards [`DdmWorkspace::pair_owners`] says which rank
+    /// solves each pair, and, once the pairs have moved there, [`DdmWorkspace::place_held`]
+    /// and [`DdmWorkspace::fill`] build this rank's buckets. A collective; returns the seconds
+    /// spent sharing.
+    pub(crate) fn census(
+        &mut self,
+        partition: &Partition,
+        n: usize,
+        bodies_of: impl Fn(usize) -> (u32, u32),
+        parallel_interface: bool,
+    ) -> f64 {
+        let ex = self.exchange.clone().expect("a solve shared between ranks");
+        self.problem
+            .census(partition, n, bodies_of, parallel_interface, &*ex)
+    }
+
+    /// The `n` contacts this rank holds after the census's pairs have moved (contact `k`
+    /// joins `bodies_of(k)`) in its buckets (see [`DdmProblem::place_held`]).
+    pub(crate) fn place_held(
         &mut self,
         partition: &Partition,
         n: usize,
         bodies_of: impl Fn(usize) -> (u32, u32) + Sync,
         parallel_interface: bool,
     ) {
-        let ranks = self.exchange.as_ref().map(|e| (e.rank(), e.size()));
         self.problem
-            .plan(partition, n, bodies_of, parallel_interface, ranks);
+            .place_held(partition, n, bodies_of, parallel_interface);
     }
 
-    /// The rank that solves contact `k` of the last [`DdmWorkspace::plan`].
-    pub(crate) fn planned_owner(&self, k: usize) -> usize {
-        let size = self.exchange.as_ref().map_or(1, |e| e.size());
-        self.problem.planned_owner(k, size)
+    /// The number of contacts of the last solve's buckets, over all ranks (once
+    /// [`DdmWorkspace::fill`] has built them).
+    pub(crate) fn contact_total(&self) -> usize {
+        self.problem.total()
     }
 
-    /// This rank's numbering of the solve of the last [`DdmWorkspace::plan`] over `partition`
+    /// This rank's numbering of the solve of the last [`DdmWorkspace::census`] over `partition`
     /// (on ranks; [`Partition::compact`]): the bodies of the subdomains it sweeps, those that
     /// any interface group's contacts join or a drive (of `drives`, bodies in the caller's
     /// numbering) moves — the bodies every rank shares after a phase — and the static ones.
@@ -1353,8 +1396,8 @@ impl DdmWorkspace {
         compact
     }
 
-    /// Builds the local problems of this rank's buckets of the last [`DdmWorkspace::plan`],
-    /// contact `k`'s by `make(k)`, for [`solve_contacts`] with [`Contacts::Held`].
+    /// Builds the local problems of this rank's buckets of the last
+    /// [`DdmWorkspace::place_held`], contact `k`'s by `make(k)`, for [`solve_contacts`] with [`Contacts::Held`].
     pub(crate) fn fill(
         &mut self,
         partition: &Partition,
@@ -1404,7 +1447,6 @@ pub(crate) fn solve_contacts(
         problem: p,
         pb,
         pv,
-        terms,
         drives: dr,
         exchange: ex,
     } = ws;
@@ -1426,7 +1468,7 @@ pub(crate) fn solve_contacts(
             assert!(p.slot.len() == impulse.len() && status.len() == impulse.len());
             impulse.len()
         }
-        Contacts::Held { .. } => p.slot.len(),
+        Contacts::Held { .. } => p.total(),
     };
     // Each rank writes back the contacts it holds, all in its own buckets.
     assert!(
@@ -1449,29 +1491,19 @@ pub(crate) fn solve_contacts(
         .filter(|e| e.size() > 1)
         .map(|e| Ranks::new(e, p, starts, dr, whole_at_end));
 
-    // 1. Residual scale (terms in parallel, summed in the equivalent order), then warm start.
-    let buckets: Vec<&Bucket> = p.buckets().collect();
-    terms.clear();
-    reserve_total(terms, n);
-    terms.resize(n, 0.0);
-    {
-        let (chunks, _) =
-            crate::slices::split_lengths(terms.as_mut_slice(), buckets.iter().map(|b| b.len()));
-        let pb = pb.as_slice();
-        buckets
-            .par_iter()
-            .zip(chunks.into_par_iter())
-            .for_each(|(b, chunk)| {
-                for (t, l) in chunk.iter_mut().zip(&b.locals) {
-                    *t = nlgs.scale2(l, pb);
-                }
-            });
-    }
-    drop(buckets);
+    // 1. Residual scale: each bucket's terms summed in its order (in parallel), the buckets'
+    // sums in the equivalent order (on ranks, each bucket's from its owner), then warm start.
+    let pbs = pb.as_slice();
+    let mut scale: Vec<f64> = p
+        .buckets()
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|b| b.locals.iter().fold(0.0, |s, l| s + nlgs.scale2(l, pbs)))
+        .collect();
     if let Some(r) = ranks.as_mut() {
-        r.share_terms(p, terms);
+        r.share_reports(&mut scale);
     }
-    let q2: f64 = terms.iter().fold(0.0, |s, &t| s + t) + drive::scale_sum(dr, pb.as_slice());
+    let q2: f64 = scale.iter().fold(0.0, |s, &t| s + t) + drive::scale_sum(dr, pb.as_slice());
     let q = if q2 > 0.0 { q2.sqrt() } else { 1.0 };
     let (sub_mine, group_mine) = match &ranks {
         Some(r) => r.mine(),
@@ -1622,20 +1654,11 @@ pub(crate) fn solve_contacts(
             .with_min_len(1024)
             .zip(status.par_iter_mut().zip(slot))
             .for_each(|(c, x)| c.r = solved(x)),
-        Contacts::Bucketed { impulse, status } => impulse
+        Contacts::Bucketed { impulse, status } | Contacts::Held { impulse, status } => impulse
             .par_iter_mut()
             .with_min_len(1024)
             .zip(status.par_iter_mut().zip(slot))
             .for_each(|(r, x)| *r = solved(x)),
-        Contacts::Held {
-            impulse,
-            status,
-            global,
-        } => impulse
-            .par_iter_mut()
-            .with_min_len(1024)
-            .zip(status.par_iter_mut().zip(global.par_iter()))
-            .for_each(|(r, (st, &g))| *r = solved((st, &p.slot[g as usize]))),
     }
     drop(buckets);
 
@@ -1833,6 +1856,26 @@ fn residual_within(
 mod tests {
     use super::*;
 
+    /// A local problem between `body1` and `body2`, for tests of the bucketing.
+    pub(super) fn local((body1, body2): (u32, u32)) -> LocalProblem {
+        LocalProblem {
+            body1,
+            body2,
+            dynamic1: true,
+            dynamic2: true,
+            frame: [DVec3::X, DVec3::Y],
+            r1: DVec3::ZERO,
+            r2: DVec3::ZERO,
+            w: crate::math::Sym3::from_mat(crate::math::DMat3::IDENTITY),
+            gap: 0.0,
+            mu: 0.0,
+            r: DVec3::ZERO,
+            r_prev: 0.0,
+            rt_prev: [0.0; 2],
+            seen: [0; 2],
+        }
+    }
+
     /// The scheduling threshold stays out of the settings' JSON at its default (checkpoints
     /// compare that JSON, so older runs still resume) and round-trips otherwise.
     #[test]
@@ -1915,22 +1958,6 @@ mod tests {
                 .map(|(a, b)| (a.min(b), a.max(b)))
                 .collect();
             pairs.sort_unstable();
-            let local = |(body1, body2): (u32, u32)| LocalProblem {
-                body1,
-                body2,
-                dynamic1: true,
-                dynamic2: true,
-                frame: [DVec3::X, DVec3::Y],
-                r1: DVec3::ZERO,
-                r2: DVec3::ZERO,
-                w: crate::math::Sym3::from_mat(crate::math::DMat3::IDENTITY),
-                gap: 0.0,
-                mu: 0.0,
-                r: DVec3::ZERO,
-                r_prev: 0.0,
-                rt_prev: [0.0; 2],
-                seen: [0; 2],
-            };
             let mut ws = DdmWorkspace::default();
             ws.problem.rebuild_with(
                 &partition,

@@ -10,12 +10,13 @@
 //! (contiguous blocks of subdomains, a rule of the partition alone) and its share of the
 //! interface groups (balanced colour by colour), and *holds* their pairs (`PairOwners`):
 //! it alone tests them, keeps their manifolds and contacts, warm-starts, builds and sweeps
-//! them. Once a step the ranks share each pair's contact count (the skeleton every rank
-//! partitions and buckets by), and the pairs whose bucket changes rank move to the new owner
-//! with their manifold and contacts. After each phase of the solve the ranks share what the
+//! them. Once a step the ranks share their contacts' count per bucket and the bodies of
+//! their interface contacts (the census every rank colours and assigns the groups by, see
+//! `ddm/census.rs`), and the pairs whose bucket changes rank move to the new owner with
+//! their manifold and contacts. After each phase of the solve the ranks share what the
 //! phase wrote that another rank reads next: the velocities of the bodies the interface
 //! contacts and the drives touch, each bucket's sums for the stop test, and once a step each
-//! contact's share of the residual's scale. At the end of the solve a grain's velocity stays
+//! bucket's share of the residual's scale. At the end of the solve a grain's velocity stays
 //! on its owner, which alone integrates it. Sharing copies
 //! values: each bucket is swept with the same arithmetic in the same order as in one
 //! process, so a run over K ranks is bit-identical to a shared-memory run with the same

@@ -78,9 +78,10 @@ pub fn write_checkpoint_on_ranks(
     }
     let rank = world.rank();
     let owners = Owners::of(world, ranks);
+    let places = world.contact_places();
     let part_file = part_path(path, rank);
     let written = super::write_framed(&part_file, PART_MAGIC, |p| {
-        encode_part(p, world, &owners, rank)
+        encode_part(p, world, &owners, &places, rank)
     })
     .map_err(|e| std::io::Error::new(e.kind(), format!("{}: {e}", part_file.display())));
     let sum = *written.as_ref().unwrap_or(&0);
@@ -115,8 +116,9 @@ fn trailing_checksum(bytes: &[u8]) -> u64 {
 }
 
 /// Rank `rank`'s part of the checkpoint of `world`: the bodies `owners` gives it and the
-/// contacts it holds.
-fn encode_part(p: &mut Enc, world: &World, owners: &Owners, rank: usize) {
+/// contacts it holds (contact `k` the `places[k]`-th of the step's, see
+/// [`World::contact_places`]).
+fn encode_part(p: &mut Enc, world: &World, owners: &Owners, places: &[u32], rank: usize) {
     let (b, c) = (&world.bodies, &world.contacts);
     let bodies: Vec<usize> = (0..b.len()).filter(|&i| owners.body[i] == rank).collect();
     let contacts: Vec<usize> = (0..c.len()).filter(|&k| world.holds_contact(k)).collect();
@@ -132,9 +134,7 @@ fn encode_part(p: &mut Enc, world: &World, owners: &Owners, rank: usize) {
     encode_bodies(p, world, bodies.iter().copied());
     encode_anchors(p, world, bodies.iter().copied());
     p.len(contacts.len());
-    contacts
-        .iter()
-        .for_each(|&k| p.u32(world.contact_index(k) as u32));
+    contacts.iter().for_each(|&k| p.u32(places[k]));
     encode_contacts(p, c, contacts.iter().copied());
 }
 
