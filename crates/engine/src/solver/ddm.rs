@@ -785,6 +785,54 @@ impl Wire for Option<f64> {
     }
 }
 
+/// Which of `groups` rank `me` of `size` reads in a solve over `partition` with `drives`:
+/// those whose bodies it sweeps or is sent after their colour ([`Ranks::readers`]) — the
+/// groups that join a subdomain it sweeps or a subdomain a group of its own joins — and the
+/// groups every rank reads: all with the interface solved in one group, a group a drive
+/// moves a body of, and the groups joining a subdomain whose shared bodies a drive moves one
+/// of (that subdomain's boundary goes to every rank, and is made of its groups' bodies).
+fn reads_groups(
+    groups: &[InterfaceGroup],
+    partition: &Partition,
+    drives: &[DriveRows],
+    me: usize,
+    size: usize,
+) -> Vec<bool> {
+    let k = partition.count();
+    if groups.iter().any(|g| g.pair.0 == STATIC) {
+        return vec![true; groups.len()];
+    }
+    let dynamic = partition.starts[k] as u32;
+    let mut driven: Vec<u32> = drives
+        .iter()
+        .map(|d| partition.new_index[d.body as usize])
+        .filter(|&b| b < dynamic)
+        .collect();
+    driven.sort_unstable();
+    // Subdomains whose boundary a drive moves, and those this rank sweeps or borders
+    // through a group of its own.
+    let mut loud = vec![false; k];
+    for &b in &driven {
+        loud[partition.starts.partition_point(|&s| s <= b as usize) - 1] = true;
+    }
+    let mut near: Vec<bool> = (0..k).map(|s| exchange::owner(s, k, size) == me).collect();
+    for g in groups.iter().filter(|g| g.owner == me) {
+        near[g.pair.0 as usize] = true;
+        near[g.pair.1 as usize] = true;
+    }
+    groups
+        .iter()
+        .map(|g| {
+            let (a, b) = (g.pair.0 as usize, g.pair.1 as usize);
+            near[a]
+                || near[b]
+                || loud[a]
+                || loud[b]
+                || g.bodies.iter().any(|b| driven.binary_search(b).is_ok())
+        })
+        .collect()
+}
+
 /// The subdomain a contact between bodies `(b1, b2)` is solved in: the subdomain of both,
 /// or of the one that is not static; [`STATIC`] for Γ (two static bodies never make a
 /// contact, detection skips them: [`STATIC`] keeps such a one in Γ).
@@ -1011,7 +1059,10 @@ impl<'a> Ranks<'a> {
             group_bodies,
             sub_readers,
             group_readers,
-            all_bodies: (0..dynamic).collect(),
+            all_bodies: match whole_at_end {
+                true => (0..dynamic).collect(),
+                false => Vec::new(),
+            },
             whole_at_end,
             starts,
             buf: ShareBuffers::default(),
@@ -1365,12 +1416,12 @@ impl DdmWorkspace {
     }
 
     /// This rank's numbering of the solve of the last [`DdmWorkspace::census`] over `partition`
-    /// (on ranks; [`Partition::compact`]): the bodies of the subdomains it sweeps, those that
-    /// any interface group's contacts join or a drive (of `drives`, bodies in the caller's
-    /// numbering) moves — the bodies every rank shares after a phase — and the static ones.
-    /// The interface groups' bodies are renumbered; [`DdmWorkspace::fill`] and
-    /// [`solve_contacts`] take the partition returned. The bodies it leaves out are those of
-    /// the other ranks' subdomains that no rank shares: nothing here reads or writes them.
+    /// (on ranks; [`Partition::compact`]): the bodies of the subdomains it sweeps, those of
+    /// the interface groups it sweeps or reads (see `reads_groups`), those a drive (of
+    /// `drives`, bodies in the caller's numbering) moves, and the static ones. The groups'
+    /// bodies are renumbered (emptied for the groups it does not read); [`DdmWorkspace::fill`]
+    /// and [`solve_contacts`] take the partition returned. The bodies it leaves out are
+    /// those that nothing it sweeps or reads touches: it neither reads nor writes them.
     pub(crate) fn compact(&mut self, partition: &Partition, drives: &[DriveRows]) -> Partition {
         let ex = self
             .exchange
@@ -1383,15 +1434,23 @@ impl DdmWorkspace {
             keep[starts[s]..starts[s + 1]].fill(true);
         }
         keep[starts[k]..].fill(true);
-        for &b in self.problem.groups.iter().flat_map(|g| &g.bodies) {
-            keep[b as usize] = true;
-        }
         for d in drives {
             keep[partition.new_index[d.body as usize] as usize] = true;
         }
+        let read = reads_groups(&self.problem.groups, partition, drives, me, size);
+        for (g, _) in self.problem.groups.iter().zip(&read).filter(|x| *x.1) {
+            for &b in &g.bodies {
+                keep[b as usize] = true;
+            }
+        }
         let (compact, local) = partition.compact(&keep);
-        for b in self.problem.groups.iter_mut().flat_map(|g| &mut g.bodies) {
-            *b = local[*b as usize];
+        for (g, &read) in self.problem.groups.iter_mut().zip(&read) {
+            match read {
+                true => g.bodies.iter_mut().for_each(|b| *b = local[*b as usize]),
+                // Nothing here reads or writes them: another rank's group, which no unit this
+                // rank sweeps or reads touches.
+                false => g.bodies.clear(),
+            }
         }
         compact
     }
@@ -1931,6 +1990,69 @@ mod tests {
         assert_eq!(group_owners(&row, &[0; 4], 1, 8, 2), [0, 0, 1, 1]);
         // The sequential interface is rank 0's whatever the ranks.
         assert_eq!(group_owners(&[((STATIC, STATIC), 9)], &[0], 1, 4, 3), [0]);
+    }
+
+    /// A rank numbers the bodies of the interface groups it sweeps or reads only: on eight
+    /// slabs in a row over two ranks, each leaves out the groups at the other end of the
+    /// row, unless a drive moves a body of a slab they join (then every rank reads them).
+    #[test]
+    fn a_rank_reads_the_groups_near_its_slabs() {
+        let n = 80;
+        let positions: Vec<DVec3> = (0..n).map(|i| DVec3::new(i as f64, 0.0, 0.0)).collect();
+        let partition = Partition::build(
+            &positions,
+            &vec![true; n],
+            [8, 1, 1],
+            Balance::Volume,
+            &[1.0; 80],
+        );
+        let starts = &partition.starts;
+        let runs: Vec<((u32, u32), usize)> = (0..7).map(|s| ((s, s + 1), 10)).collect();
+        let (colour, colours) = colour_groups(&runs, 8);
+        let owner = group_owners(&runs, &colour, colours, 8, 2);
+        let groups: Vec<InterfaceGroup> = runs
+            .iter()
+            .enumerate()
+            .map(|(g, &(pair, _))| InterfaceGroup {
+                pair,
+                colour: colour[g],
+                owner: owner[g],
+                bucket: Bucket::default(),
+                bodies: vec![starts[g + 1] as u32 - 1, starts[g + 1] as u32],
+            })
+            .collect();
+        let reads = |me: usize, drives: &[DriveRows]| -> Vec<usize> {
+            let read = reads_groups(&groups, &partition, drives, me, 2);
+            (0..7).filter(|&g| read[g]).collect()
+        };
+        let (r0, r1) = (reads(0, &[]), reads(1, &[]));
+        assert!(
+            r0.starts_with(&[0, 1, 2, 3]) && !r0.contains(&6),
+            "rank 0 reads {r0:?}"
+        );
+        assert!(
+            r1.ends_with(&[3, 4, 5, 6]) && !r1.contains(&0),
+            "rank 1 reads {r1:?}"
+        );
+        // A drive on the last body (slab 7): the groups joining slab 7 go to every rank.
+        let drive = DriveRows {
+            body: partition.order[n - 1],
+            target_v: DVec3::ZERO,
+            target_w: DVec3::ZERO,
+            bound_v: DVec3::ZERO,
+            bound_w: DVec3::ZERO,
+            impulse_v: DVec3::ZERO,
+            impulse_w: DVec3::ZERO,
+            translate: true,
+            rotate: true,
+        };
+        assert!(reads(0, &[drive]).contains(&6));
+        // The interface in one sequential group: every rank reads it.
+        let one = InterfaceGroup {
+            pair: (STATIC, STATIC),
+            ..groups[0].clone()
+        };
+        assert_eq!(reads_groups(&[one], &partition, &[], 1, 2), [true]);
     }
 
     proptest::proptest! {
