@@ -158,10 +158,22 @@ impl Summary {
 /// temporary file, giving back the space it took, and leaves any previous file at `path` as
 /// it was.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_atomic_with(path, |f| f.write_all(bytes))
+}
+
+/// [`write_atomic`] of what `write` writes, in pieces (through a buffer): a large file need
+/// not be put together in memory first.
+pub fn write_atomic_with(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     let tmp = path.with_extension("tmp");
     let written = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
+        let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+        write(&mut f)?;
+        let f = f
+            .into_inner()
+            .map_err(std::io::IntoInnerError::into_error)?;
         f.sync_all()?;
         std::fs::rename(&tmp, path)
     })();
@@ -221,4 +233,34 @@ pub fn series_row(r: &StepReport, kinetic_energy: f64) -> String {
         r.times.nlgs,
         r.times.other
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file written in pieces replaces the previous one whole, or not at all: a write that
+    /// fails halfway leaves the previous file as it was and no temporary file.
+    #[test]
+    fn an_atomic_write_in_pieces_is_whole_or_absent() {
+        let dir = std::env::temp_dir().join(format!("ballast-atomic-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("a.vtu");
+        write_atomic(&path, b"old").unwrap();
+        let failed = write_atomic_with(&path, |f| {
+            f.write_all(&[7; 100_000])?;
+            Err(std::io::Error::other("disk full"))
+        });
+        assert!(failed.is_err());
+        assert_eq!(std::fs::read(&path).unwrap(), b"old");
+        assert!(!path.with_extension("tmp").exists());
+        write_atomic_with(&path, |f| {
+            f.write_all(b"new ")?;
+            f.write_all(&[b'x'; 100_000])
+        })
+        .unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert_eq!((bytes.len(), &bytes[..4]), (100_004, &b"new "[..]));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

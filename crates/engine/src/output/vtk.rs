@@ -52,7 +52,7 @@
 //! offsets are Int32 unless a file needs more.
 
 use super::shared::{gather, Owners};
-use super::{naming, write_atomic};
+use super::{naming, write_atomic, write_atomic_with};
 use crate::bodies::BodyKind;
 use crate::laws::ContactStatus;
 use crate::math::{DMat3, DVec3};
@@ -1051,14 +1051,14 @@ fn write_vtu(
     xml += &section(Section::Cells, "<Cells>", "</Cells>", "      ");
     xml += "    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _";
 
-    let tail = b"\n  </AppendedData>\n</VTKFile>\n";
-    let mut file = Vec::with_capacity(xml.len() + offset as usize + tail.len());
-    file.extend_from_slice(xml.as_bytes());
-    for p in &packed {
-        file.extend_from_slice(p);
-    }
-    file.extend_from_slice(tail);
-    write_atomic(path, &file)?;
+    // Written piece by piece: the compressed arrays are not copied into one buffer first.
+    write_atomic_with(path, |f| {
+        f.write_all(xml.as_bytes())?;
+        for p in &packed {
+            f.write_all(p)?;
+        }
+        f.write_all(b"\n  </AppendedData>\n</VTKFile>\n")
+    })?;
     Ok(arrays
         .iter()
         .filter(|a| matches!(a.section, Section::Point | Section::Cell | Section::Points))
