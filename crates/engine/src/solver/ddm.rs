@@ -345,15 +345,11 @@ impl DdmProblem {
         self.place_gamma(k);
         if ranks.is_some() {
             // The bodies each group shares.
-            let dynamic = partition.starts[k] as u32;
             for &(_, idx) in &self.gamma {
                 let group = &mut self.groups[self.slot[idx as usize].0 as usize - k];
-                let (b1, b2) = bodies_of(idx as usize);
-                for b in [b1, b2].map(|b| partition.new_index[b as usize]) {
-                    if b < dynamic {
-                        group.bodies.push(b);
-                    }
-                }
+                group
+                    .bodies
+                    .extend(shared_bodies(partition, bodies_of(idx as usize)));
             }
             for g in &mut self.groups {
                 g.bodies.sort_unstable();
@@ -812,8 +808,11 @@ fn reads_groups(
     // Subdomains whose boundary a drive moves, and those this rank sweeps or borders
     // through a group of its own.
     let mut loud = vec![false; k];
-    for &b in &driven {
-        loud[partition.starts.partition_point(|&s| s <= b as usize) - 1] = true;
+    for d in drives {
+        match partition.subdomain[d.body as usize] {
+            STATIC => {}
+            s => loud[s as usize] = true,
+        }
     }
     let mut near: Vec<bool> = (0..k).map(|s| exchange::owner(s, k, size) == me).collect();
     for g in groups.iter().filter(|g| g.owner == me) {
@@ -846,6 +845,16 @@ fn home(partition: &Partition, (b1, b2): (u32, u32)) -> u32 {
         (a, STATIC) => a,
         _ => STATIC,
     }
+}
+
+/// The bodies a Γ contact between bodies `(b1, b2)` gives its group to share: the dynamic
+/// ones, in solver numbering.
+fn shared_bodies(partition: &Partition, (b1, b2): (u32, u32)) -> impl Iterator<Item = u32> {
+    let dynamic = partition.starts[partition.count()] as u32;
+    [b1, b2]
+        .map(|b| partition.new_index[b as usize])
+        .into_iter()
+        .filter(move |&b| b < dynamic)
 }
 
 /// The interface group of a Γ contact between bodies `(b1, b2)`: its two subdomains, in

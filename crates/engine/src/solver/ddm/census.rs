@@ -10,7 +10,7 @@
 //! each rank buckets the contacts it then holds — exactly those of its buckets, in pair
 //! order, the order a single process keeps within a bucket ([`DdmProblem::place_held`]).
 
-use super::{group_pair, home, DdmProblem};
+use super::{group_pair, home, shared_bodies, DdmProblem};
 use crate::solver::exchange::{self, Exchange};
 use crate::solver::partition::{Partition, STATIC};
 use std::collections::BTreeMap;
@@ -34,7 +34,6 @@ impl DdmProblem {
         ex: &dyn Exchange,
     ) -> f64 {
         let k = partition.count();
-        let dynamic = partition.starts[k] as u32;
         let mut sub = vec![0usize; k];
         let mut groups = Groups::new();
         for idx in 0..n {
@@ -45,11 +44,7 @@ impl DdmProblem {
                         .entry(group_pair(partition, b, parallel_interface))
                         .or_default();
                     g.0 += 1;
-                    for i in [b.0, b.1].map(|i| partition.new_index[i as usize]) {
-                        if i < dynamic {
-                            g.1.push(i);
-                        }
-                    }
+                    g.1.extend(shared_bodies(partition, b));
                 }
                 s => sub[s as usize] += 1,
             }
